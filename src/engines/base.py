@@ -1,0 +1,97 @@
+"""The one interface every broad phase implements, and the input checks at its boundary.
+
+A backend is built from arrays (`reset`), told that the same objects moved (`update`, where
+temporal coherence can pay off) and asked for candidate pairs (`pairs`): an (m, 2) int64 array,
+i < j in every row, no pair twice. What a backend promises about those pairs is in `reports`.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import Any, ClassVar, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from scenes.scene import check_positions, check_radii
+
+PairArray = npt.NDArray[np.int64]
+
+EMPTY_PAIRS: PairArray = np.empty((0, 2), dtype=np.int64)
+
+# "boxes": a superset of the pairs whose axis-aligned boxes overlap ("exact" if equal to it);
+# "contacts": the engine ran its own narrow phase first, so only a superset of the truly
+# overlapping circles can be promised (box-only overlaps never reach Python).
+Reports = Literal["boxes", "contacts"]
+
+
+class BroadPhase(ABC):
+    """Base class: subclasses implement `_reset`, `_update` and `_pairs` on validated arrays.
+
+    Class attributes describe the backend: `name` ("family.variant"), `reports` (see above),
+    `exact` (True when the pairs are exactly the box overlaps, no extra candidates), and
+    `defaults`, the tunable parameters with their defaults. Unknown parameters are an error.
+    """
+
+    name: ClassVar[str] = ""
+    reports: ClassVar[Reports] = "boxes"
+    exact: ClassVar[bool] = True
+    defaults: ClassVar[dict[str, Any]] = {}
+
+    def __init__(self, **params: Any) -> None:
+        unknown = sorted(set(params) - set(self.defaults))
+        if unknown:
+            known = ", ".join(sorted(self.defaults)) or "none"
+            raise ValueError(f"{self.name}: unknown parameter(s) {', '.join(unknown)}; known: {known}")
+        self.params: dict[str, Any] = {**self.defaults, **params}
+        self.n = 0
+        self.radii = np.empty(0)
+        self._stats: dict[str, float] = {}
+
+    def reset(self, positions: npt.ArrayLike, radii: npt.ArrayLike) -> None:
+        """Build from scratch for these objects (positions (n, 2), radii (n,))."""
+        pos = check_positions(positions)
+        self.radii = check_radii(radii, pos.shape[0])
+        self.n = pos.shape[0]
+        self._reset(pos, self.radii)
+
+    def update(self, positions: npt.ArrayLike) -> None:
+        """The same objects (same radii, same order) moved to `positions`."""
+        self._update(check_positions(positions, self.n))
+
+    def pairs(self) -> PairArray:
+        """Candidate pairs for the current positions: (m, 2) int64, i < j, unique."""
+        return self._pairs()
+
+    def stats(self) -> dict[str, float]:
+        """Work counters of the last build or query (nodes visited, duplicate tests...)."""
+        return dict(self._stats)
+
+    def _int_param(self, key: str, minimum: int) -> int:
+        """The parameter `key` as an int >= minimum, or a ValueError naming it."""
+        value = self.params[key]
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+            raise ValueError(f"{self.name}: {key} must be an integer >= {minimum}, got {value!r}")
+        return int(value)
+
+    def validate(self) -> None:
+        """Check the structure's invariants; raises AssertionError when one is broken."""
+
+    def close(self) -> None:
+        """Release engine resources (worlds, spaces)."""
+
+    def describe(self) -> str:
+        """Name with parameters, e.g. 'own.grid(p=16)'."""
+        if not self.params:
+            return self.name
+        return f"{self.name}(" + ", ".join(f"{k}={v}" for k, v in sorted(self.params.items())) + ")"
+
+    @abstractmethod
+    def _reset(self, positions: np.ndarray, radii: np.ndarray) -> None: ...
+
+    def _update(self, positions: np.ndarray) -> None:
+        # Default: no temporal coherence, rebuild from scratch.
+        self._reset(positions, self.radii)
+
+    @abstractmethod
+    def _pairs(self) -> PairArray: ...

@@ -1,0 +1,69 @@
+"""Pair arrays: canonical form, set operations by integer key, and the shared exact narrow phase."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import EMPTY_PAIRS, PairArray
+
+
+def canonical(first: np.ndarray, second: np.ndarray) -> PairArray:
+    """Pairs from two index arrays, ordered i < j, self-pairs and repeats removed, sorted."""
+    a = np.asarray(first, dtype=np.int64).ravel()
+    b = np.asarray(second, dtype=np.int64).ravel()
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    keep = lo != hi
+    if not keep.any():
+        return EMPTY_PAIRS.copy()
+    out = np.unique(np.column_stack([lo[keep], hi[keep]]), axis=0)
+    return out.astype(np.int64, copy=False)
+
+
+def keys(pairs: np.ndarray, n: int) -> np.ndarray:
+    """One int64 key per pair (i * n + j), for set operations between pair arrays."""
+    p = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    return p[:, 0] * np.int64(max(n, 1)) + p[:, 1]
+
+
+def from_keys(k: np.ndarray, n: int) -> PairArray:
+    n = np.int64(max(n, 1))
+    return np.column_stack([k // n, k % n]).astype(np.int64)
+
+
+def missing(expected: np.ndarray, got: np.ndarray, n: int) -> PairArray:
+    """Pairs in `expected` that `got` lacks."""
+    return from_keys(np.setdiff1d(keys(expected, n), keys(got, n)), n)
+
+
+def is_canonical(pairs: np.ndarray, n: int) -> str | None:
+    """None if `pairs` is a valid pair array for n objects, else what is wrong with it."""
+    p = np.asarray(pairs)
+    if p.ndim != 2 or p.shape[1] != 2:
+        return f"shape {p.shape} is not (m, 2)"
+    if not np.issubdtype(p.dtype, np.integer):
+        return f"dtype {p.dtype} is not an integer type"
+    if len(p) == 0:
+        return None
+    if p.min() < 0 or p.max() >= n:
+        return f"indices outside 0..{n - 1}"
+    if not (p[:, 0] < p[:, 1]).all():
+        return "a row with i >= j"
+    k = keys(p, n)
+    if np.unique(k).size != k.size:
+        return f"{k.size - np.unique(k).size} pair(s) reported twice"
+    return None
+
+
+def circles_overlap(positions: np.ndarray, radii: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """The exact narrow phase shared by every backend: distance <= r_i + r_j (touching counts)."""
+    if len(pairs) == 0:
+        return np.zeros(0, dtype=bool)
+    i, j = pairs[:, 0], pairs[:, 1]
+    d = positions[j] - positions[i]
+    reach = radii[i] + radii[j]
+    return d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] <= reach * reach
+
+
+def narrow_phase(positions: np.ndarray, radii: np.ndarray, pairs: np.ndarray) -> PairArray:
+    """The candidate pairs whose circles truly overlap."""
+    return pairs[circles_overlap(positions, radii, pairs)]

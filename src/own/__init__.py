@@ -1,0 +1,1 @@
+"""The project's own broad phases: compiled (numba) exact algorithms and the essay's Python ones."""

@@ -1,0 +1,113 @@
+"""Scene files: CSV with a header `x,y,r` and optional `vx,vy`, one circle per line.
+
+An optional first line `# box: xmin,ymin,xmax,ymax` gives the walls; without it the box is the
+bounding box of the circles. Every problem is reported as a SceneFileError naming file and line.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .scene import Scene, check_box
+
+REQUIRED = ("x", "y", "r")
+OPTIONAL = ("vx", "vy")
+BOX_PREFIX = "# box:"
+
+
+class SceneFileError(ValueError):
+    """A scene file that cannot be read; the message names the file, the line and the problem."""
+
+
+def _number(text: str, where: str, column: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise SceneFileError(f"{where}: column {column} is not a number: {text.strip()!r}") from None
+    if not math.isfinite(value):
+        raise SceneFileError(f"{where}: column {column} is not finite: {text.strip()!r}")
+    return value
+
+
+def load_scene(path: str | os.PathLike, name: str | None = None) -> Scene:
+    """Read a scene file; raises SceneFileError for anything wrong with it."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SceneFileError(f"{path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SceneFileError(f"{path}: cannot be read ({exc})") from None
+    lines = text.splitlines()
+    box = None
+    first = 0
+    if lines and lines[0].startswith(BOX_PREFIX):
+        try:
+            box = check_box([float(v) for v in lines[0][len(BOX_PREFIX):].split(",")])
+        except ValueError as exc:
+            raise SceneFileError(f"{path}, line 1: bad box line ({exc})") from None
+        first = 1
+    rows = list(csv.reader(lines[first:]))
+    if not rows or not any(cell.strip() for cell in rows[0]):
+        raise SceneFileError(f"{path}: empty file (expected a header line x,y,r[,vx,vy])")
+    header = [h.strip().lower() for h in rows[0]]
+    header_line = first + 1
+    missing = [c for c in REQUIRED if c not in header]
+    extra = [c for c in header if c not in REQUIRED + OPTIONAL]
+    if missing or extra or len(set(header)) != len(header):
+        raise SceneFileError(
+            f"{path}, line {header_line}: header must be x,y,r with optional vx,vy; got {','.join(header)}"
+            + (f" (missing {','.join(missing)})" if missing else "")
+            + (f" (unknown {','.join(extra)})" if extra else "")
+        )
+    if ("vx" in header) != ("vy" in header):
+        raise SceneFileError(f"{path}, line {header_line}: give both vx and vy, or neither")
+    col = {c: header.index(c) for c in header}
+    values = np.zeros((len(rows) - 1, 5))
+    kept = 0
+    for k, row in enumerate(rows[1:]):
+        where = f"{path}, line {header_line + 1 + k}"
+        if not row or not any(cell.strip() for cell in row):
+            continue  # blank lines are allowed
+        if len(row) != len(header):
+            raise SceneFileError(f"{where}: expected {len(header)} columns ({','.join(header)}), found {len(row)}")
+        for slot, c in enumerate(REQUIRED + OPTIONAL):
+            if c in col:
+                values[kept, slot] = _number(row[col[c]], where, c)
+        if values[kept, 2] < 0:
+            raise SceneFileError(f"{where}: radius is negative: {values[kept, 2]:g}")
+        kept += 1
+    values = values[:kept]
+    if kept == 0:
+        raise SceneFileError(f"{path}: no circles after the header line")
+    pos, radii, vel = values[:, :2], values[:, 2], values[:, 3:5]
+    if box is None:
+        lo, hi = (pos - radii[:, None]).min(axis=0), (pos + radii[:, None]).max(axis=0)
+        pad = np.where(hi > lo, 0.0, 1.0)  # a degenerate extent still needs a box
+        box = (lo[0] - pad[0], lo[1] - pad[1], hi[0] + pad[0], hi[1] + pad[1])
+    return Scene(pos, radii, vel, box=box, name=name or path.stem, meta={"dist": "file", "file": str(path)})
+
+
+def save_scene(scene: Scene, path: str | os.PathLike) -> Path:
+    """Write `scene` (with its box and velocities) so that load_scene gives it back exactly."""
+    path = Path(path)
+    data = np.column_stack([scene.positions, scene.radii, scene.velocities])
+    # Write to a temporary file and rename, so an interrupted save never leaves half a scene.
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as out:
+            out.write(BOX_PREFIX + " " + ",".join(repr(float(v)) for v in scene.box) + "\n")
+            out.write("x,y,r,vx,vy\n")
+            for row in data.tolist():
+                out.write(",".join(repr(v) for v in row) + "\n")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path

@@ -1,0 +1,90 @@
+"""The scene record (n circles in a box) and the input checks every entry point shares."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+# The essay's arena: a 2000 x 2000 px box.
+ESSAY_BOX: tuple[float, float, float, float] = (0.0, 0.0, 2000.0, 2000.0)
+
+
+def check_positions(positions: object, n: int | None = None, what: str = "positions") -> FloatArray:
+    """Return `positions` as a C-contiguous (n, 2) float64 array, or raise ValueError naming the problem."""
+    arr = np.asarray(positions, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise ValueError(f"{what} must have shape (n, 2), got {arr.shape}")
+    if n is not None and arr.shape[0] != n:
+        raise ValueError(f"{what} has {arr.shape[0]} rows but the scene has {n} objects")
+    if not np.isfinite(arr).all():
+        row = int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])
+        raise ValueError(f"{what} row {row} is not finite: {arr[row].tolist()} (NaN or infinite coordinates)")
+    return np.ascontiguousarray(arr)
+
+
+def check_radii(radii: object, n: int) -> FloatArray:
+    """Return `radii` as a contiguous (n,) float64 array of finite non-negative values, or raise ValueError."""
+    arr = np.asarray(radii, dtype=np.float64)
+    if arr.ndim != 1 or arr.shape[0] != n:
+        raise ValueError(f"radii must have shape ({n},) to match the positions, got {arr.shape}")
+    bad = ~np.isfinite(arr) | (arr < 0)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        problem = "negative" if arr[i] < 0 else "not finite"
+        raise ValueError(f"radius {i} is {problem}: {arr[i]!r}")
+    return np.ascontiguousarray(arr)
+
+
+def check_box(box: object) -> tuple[float, float, float, float]:
+    """Return the box as (xmin, ymin, xmax, ymax) floats with min < max on both axes."""
+    try:
+        xmin, ymin, xmax, ymax = (float(v) for v in box)  # type: ignore[union-attr]
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"box must be four numbers (xmin, ymin, xmax, ymax), got {box!r}") from exc
+    if not all(np.isfinite([xmin, ymin, xmax, ymax])) or not (xmin < xmax and ymin < ymax):
+        raise ValueError(f"box must be finite with xmin < xmax and ymin < ymax, got {box!r}")
+    return xmin, ymin, xmax, ymax
+
+
+@dataclass(frozen=True)
+class Scene:
+    """n circles: centres (n, 2), radii (n,), velocities (n, 2) in units per second, and the box.
+
+    The flags say which parts of the essay's motion the scene uses; stepping does only those.
+    """
+
+    positions: FloatArray
+    radii: FloatArray
+    velocities: FloatArray
+    box: tuple[float, float, float, float] = ESSAY_BOX
+    name: str = "scene"
+    moves: bool = True
+    walls: bool = True
+    responds: bool = True
+    meta: dict = field(default_factory=dict, compare=False)
+
+    def __post_init__(self) -> None:
+        pos = check_positions(self.positions)
+        n = pos.shape[0]
+        object.__setattr__(self, "positions", pos)
+        object.__setattr__(self, "radii", check_radii(self.radii, n))
+        object.__setattr__(self, "velocities", check_positions(self.velocities, n, what="velocities"))
+        object.__setattr__(self, "box", check_box(self.box))
+
+    @property
+    def n(self) -> int:
+        return int(self.positions.shape[0])
+
+    @property
+    def radius_range(self) -> tuple[float, float]:
+        if self.n == 0:
+            return 0.0, 0.0
+        return float(self.radii.min()), float(self.radii.max())
+
+    def with_(self, **changes: object) -> "Scene":
+        """A copy with some fields replaced (validated again)."""
+        return replace(self, **changes)

@@ -1,0 +1,64 @@
+"""Hypothesis strategies for scenes that try to break broad phases.
+
+Besides the generators, they draw adversarial layouts: circles on a small integer lattice with
+radii that make many boxes touch exactly, duplicated positions, everything on one line, radii
+from zero to larger than the box, and scenes far from the origin.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import strategies as st
+
+from scenes import DISTRIBUTIONS, generate
+
+
+@st.composite
+def generated_scenes(draw, max_n: int = 200):
+    """A generator scene with random n, seed and radii (equal, mixed, tiny or huge)."""
+    n = draw(st.integers(0, max_n))
+    dist = draw(st.sampled_from(DISTRIBUTIONS))
+    seed = draw(st.integers(0, 2**31 - 1))
+    sizes = draw(st.sampled_from(["essay", "mixed", "tiny", "huge", "wide_mix"]))
+    kw = {
+        "essay": {"radius": 10.0},
+        "mixed": {"radii": (1.0, 100.0)},
+        "tiny": {"radius": 1e-6},
+        "huge": {"radius": 3000.0},  # larger than the box: everything overlaps
+        "wide_mix": {"radii": (1e-3, 1e3)},
+    }[sizes]
+    scene = generate(dist, n, seed=seed, **kw)
+    return scene.positions, scene.radii
+
+
+@st.composite
+def lattice_scenes(draw, max_n: int = 120):
+    """Integer and half-integer positions with radii in {0, 0.25, 0.5, 1}: exact ties everywhere."""
+    n = draw(st.integers(0, max_n))
+    coords = st.integers(0, 12).map(lambda v: v * 0.5)
+    pos = draw(st.lists(st.tuples(coords, coords), min_size=n, max_size=n))
+    radii = draw(st.lists(st.sampled_from([0.0, 0.25, 0.5, 1.0]), min_size=n, max_size=n))
+    shift = draw(st.sampled_from([0.0, -1000.0, 1e6]))  # exact in float64 for these values
+    positions = np.array(pos, dtype=np.float64).reshape(-1, 2) + shift
+    return positions, np.array(radii, dtype=np.float64)
+
+
+@st.composite
+def degenerate_scenes(draw, max_n: int = 150):
+    """Duplicated points, one vertical or horizontal line, or all at one point."""
+    n = draw(st.integers(0, max_n))
+    rng = np.random.default_rng(draw(st.integers(0, 2**31 - 1)))
+    kind = draw(st.sampled_from(["duplicates", "vline", "hline", "point"]))
+    r = draw(st.sampled_from([0.0, 0.5, 5.0]))
+    if kind == "duplicates":
+        base = rng.uniform(0, 100, (max(1, n // 4), 2))
+        positions = base[rng.integers(0, len(base), n)]
+    elif kind == "point":
+        positions = np.full((n, 2), 42.0)
+    else:
+        t = rng.uniform(0, 1000, n)
+        positions = np.column_stack([np.full(n, 7.0), t] if kind == "vline" else [t, np.full(n, 7.0)])
+    return positions.reshape(-1, 2), np.full(n, r)
+
+
+any_scene = st.one_of(generated_scenes(), lattice_scenes(), degenerate_scenes())

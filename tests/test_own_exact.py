@@ -1,0 +1,128 @@
+"""Every exact own backend returns exactly the brute-force set of overlapping boxes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+
+import engines
+from engines.pairs import is_canonical, keys
+from own.brute import brute_pairs
+from scenes import generate
+from scenes.motion import simulate
+from strategies import any_scene
+
+# (backend, params): every exact backend with the parameter settings that change its code paths.
+EXACT = [
+    ("own.brute", {}),
+    ("own.sap", {"axis": "x"}),
+    ("own.sap", {"axis": "y"}),
+    ("own.sap", {"axis": "auto"}),
+    ("own.grid", {}),
+    ("own.grid", {"p": 1}),
+    ("own.grid", {"p": 7}),
+    ("own.grid", {"cell": 0.3}),  # cells far smaller than most objects: many cells per object
+    ("own.quadtree", {}),
+    ("own.quadtree", {"capacity": 1}),
+    ("own.quadtree", {"capacity": 2, "max_depth": 3}),
+]
+IDS = [name + "".join(f"-{k}={v}" for k, v in p.items()) for name, p in EXACT]
+
+
+def assert_exact(name, params, positions, radii):
+    backend = engines.create(name, **params)
+    backend.reset(positions, radii)
+    got = backend.pairs()
+    assert is_canonical(got, len(positions)) is None, is_canonical(got, len(positions))
+    backend.validate()
+    expected = brute_pairs(positions, radii)
+    n = len(positions)
+    missed = np.setdiff1d(keys(expected, n), keys(got, n))
+    extra = np.setdiff1d(keys(got, n), keys(expected, n))
+    assert missed.size == 0, f"{name}{params} missed {missed.size} pair(s), e.g. {divmod(int(missed[0]), n)}"
+    assert extra.size == 0, f"{name}{params} reported {extra.size} non-overlapping pair(s)"
+    assert backend.exact
+
+
+@pytest.mark.parametrize(("name", "params"), EXACT, ids=IDS)
+@settings(max_examples=150)
+@given(scene=any_scene)
+def test_exact_on_random_and_adversarial_scenes(name, params, scene):
+    assert_exact(name, params, *scene)
+
+
+@pytest.mark.parametrize(("name", "params"), EXACT, ids=IDS)
+def test_exact_on_the_essay_scene_and_its_variants(name, params):
+    for dist in ("uniform", "gauss_x", "gauss_y", "clusters"):
+        scene = generate(dist, 1500, seed=3)
+        assert_exact(name, params, scene.positions, scene.radii)
+    mixed = generate("uniform", 1500, radii=(0.5, 200.0), seed=4)
+    assert_exact(name, params, mixed.positions, mixed.radii)
+
+
+@pytest.mark.parametrize(("name", "params"), EXACT, ids=IDS)
+def test_exact_across_update_frames(name, params):
+    traj = simulate(generate("clusters", 400, seed=5, speed=2000.0), frames=30)
+    backend = engines.create(name, **params)
+    backend.reset(traj.positions[0], traj.scene.radii)
+    for f in range(traj.frames):
+        backend.update(traj.positions[f])
+        got = backend.pairs()
+        np.testing.assert_array_equal(np.sort(keys(got, 400)), keys(traj.box_pairs[f], 400))
+
+
+# The boundary rule, pinned by hand (closed intervals, as Bullet and Chipmunk define it).
+BOUNDARY = {
+    # centres 2 apart, radii 1: boxes touch exactly on x -> overlap
+    "touching boxes overlap": ([[0.0, 0.0], [2.0, 0.0]], [1.0, 1.0], [(0, 1)]),
+    "touching corners overlap": ([[0.0, 0.0], [2.0, 2.0]], [1.0, 1.0], [(0, 1)]),
+    "1e-12 apart do not": ([[0.0, 0.0], [2.0 + 1e-12, 0.0]], [1.0, 1.0], []),
+    "1e-12 apart on y do not": ([[0.0, 0.0], [0.0, 2.0 + 1e-12]], [1.0, 1.0], []),
+    "coincident circles do": ([[5.0, 5.0], [5.0, 5.0]], [1.0, 1.0], [(0, 1)]),
+    "coincident points of radius zero do": ([[5.0, 5.0], [5.0, 5.0]], [0.0, 0.0], [(0, 1)]),
+    "a point on a box edge": ([[0.0, 0.0], [1.0, 0.5]], [1.0, 0.0], [(0, 1)]),
+    "one inside another": ([[0.0, 0.0], [0.1, 0.1]], [100.0, 0.01], [(0, 1)]),
+    "no objects": (np.zeros((0, 2)), [], []),
+    "one object": ([[1.0, 1.0]], [1.0], []),
+    "a chain of touching boxes, ends apart": ([[0.0, 0.0], [2.0, 0.0], [4.0, 0.0]], [1.0, 1.0, 1.0], [(0, 1), (1, 2)]),
+    "the chain broken by 1e-9": ([[0.0, 0.0], [2.0, 0.0], [4.0 + 1e-9, 0.0]], [1.0, 1.0, 1.0], [(0, 1)]),
+}
+
+
+@pytest.mark.parametrize(("name", "params"), EXACT, ids=IDS)
+@pytest.mark.parametrize("case", list(BOUNDARY))
+def test_boundary_rule(name, params, case):
+    positions, radii, expected = BOUNDARY[case]
+    backend = engines.create(name, **params)
+    backend.reset(np.asarray(positions, dtype=float).reshape(-1, 2), radii)
+    got = sorted(map(tuple, backend.pairs().tolist()))
+    assert got == expected
+
+
+def test_boundary_cases_match_brute_force():
+    # The hand-made expectations and the reference agree, so the reference is pinned too.
+    for positions, radii, expected in BOUNDARY.values():
+        pos = np.asarray(positions, dtype=float).reshape(-1, 2)
+        assert sorted(map(tuple, brute_pairs(pos, np.asarray(radii, dtype=float)).tolist())) == expected
+
+
+def test_quadtree_straddlers_stay_high_and_are_found():
+    # A big circle in the middle straddles every split; small ones around it sit deep.
+    rng = np.random.default_rng(0)
+    pos = np.vstack([[500.0, 500.0], rng.uniform(0, 1000, (300, 2))])
+    radii = np.concatenate([[200.0], np.full(300, 3.0)])
+    tree = engines.create("own.quadtree", capacity=2)
+    tree.reset(pos, radii)
+    tree.validate()
+    got = tree.pairs()
+    assert set(map(tuple, got.tolist())) == set(map(tuple, brute_pairs(pos, radii).tolist()))
+    assert tree.stats()["depth"] >= 3
+
+
+def test_grid_reports_each_pair_once_with_many_shared_cells():
+    # Two large overlapping boxes share hundreds of cells; the pair must appear exactly once.
+    grid = engines.create("own.grid", p=30)
+    grid.reset([[0.0, 0.0], [3.0, 3.0]], [10.0, 10.0])
+    assert grid.pairs().tolist() == [[0, 1]]
+    assert grid.stats()["tests"] > 100
