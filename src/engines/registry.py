@@ -20,6 +20,19 @@ BACKENDS: dict[str, str] = {
     "essay.sap": "own.essay.sap:EssaySweepAndPrune",
     "essay.grid": "own.essay.grid:EssayGrid",
     "essay.quadtree": "own.essay.quadtree:EssayQuadtree",
+    "chipmunk.bbtree": "engines.chipmunk:ChipmunkTree",
+    "chipmunk.hash": "engines.chipmunk:ChipmunkHash",
+    "bullet.dbvt": "engines.bullet:BulletDbvt",
+    "bullet.simple": "engines.bullet:BulletSimple",
+    "fcl.tree": "engines.fcl_tree:FclTree",
+    "coal.naive": "engines.coal_managers:naive",
+    "coal.sap": "engines.coal_managers:sap",
+    "coal.ssap": "engines.coal_managers:ssap",
+    "coal.interval": "engines.coal_managers:interval",
+    "coal.tree": "engines.coal_managers:tree",
+    "coal.tree_array": "engines.coal_managers:tree_array",
+    "coal.hash": "engines.coal_managers:hash",
+    "scipy.kdtree": "engines.scipy_kdtree:KDTree",
 }
 
 

@@ -1,0 +1,91 @@
+"""Bullet (pybullet) broad phases: the dynamic AABB tree (btDbvtBroadphase) and brute force.
+
+pybullet exposes no pair list of its broad phase in bulk, only the narrow phase's contacts:
+circles become spheres in the z = 0 plane (mass 1, no gravity, never stepped), moved one by one
+with `resetBasePositionAndOrientation` (there is no batch setter), and `pairs()` runs
+`performCollisionDetection` and reads `getContactPoints`. Bullet keeps contacts up to its
+contact breaking threshold (0.02 units) apart, and its tree uses fattened boxes: such pairs
+come back as false positives, not errors.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pybullet
+
+from .base import BroadPhase
+from .pairs import canonical
+
+
+class _Bullet(BroadPhase):
+    exact = False
+    reports = "contacts"
+    reset_flags = 0
+
+    def __init__(self, **params):
+        super().__init__(**params)
+        self._client = pybullet.connect(pybullet.DIRECT)
+        if self._client < 0:
+            raise RuntimeError(f"{self.name}: pybullet could not start a physics server")
+
+    def _call(self, fn, *args, **kwargs):
+        return fn(*args, physicsClientId=self._client, **kwargs)
+
+    def _reset(self, positions, radii):
+        self._call(pybullet.resetSimulation, self.reset_flags)
+        self._call(pybullet.setGravity, 0.0, 0.0, 0.0)
+        # One collision shape per distinct radius, shared by the bodies of that size.
+        ids = np.empty(self.n, dtype=np.int64)
+        for r in np.unique(radii):
+            which = np.flatnonzero(radii == r)
+            shape = self._call(pybullet.createCollisionShape, pybullet.GEOM_SPHERE, radius=float(r))
+            for k in which:
+                x, y = positions[k]
+                ids[k] = self._call(
+                    pybullet.createMultiBody, baseMass=1.0, baseCollisionShapeIndex=shape,
+                    basePosition=[float(x), float(y), 0.0],
+                )
+        self._ids = ids
+        self._index = np.full(int(ids.max()) + 1 if self.n else 0, -1, dtype=np.int64)
+        self._index[ids] = np.arange(self.n)
+
+    def _update(self, positions):
+        reset, client, still = pybullet.resetBasePositionAndOrientation, self._client, (0.0, 0.0, 0.0, 1.0)
+        for uid, (x, y) in zip(self._ids.tolist(), positions.tolist()):
+            reset(uid, (x, y, 0.0), still, physicsClientId=client)
+
+    def _pairs(self):
+        self._call(pybullet.performCollisionDetection)
+        points = self._call(pybullet.getContactPoints)
+        if not points:
+            return canonical([], [])
+        a = np.fromiter((p[1] for p in points), dtype=np.int64, count=len(points))
+        b = np.fromiter((p[2] for p in points), dtype=np.int64, count=len(points))
+        self._stats = {"contact_points": len(points)}
+        return canonical(self._index[a], self._index[b])
+
+    def close(self):
+        if self._client is not None and self._client >= 0:
+            pybullet.disconnect(physicsClientId=self._client)
+        self._client = None
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
+
+
+class BulletDbvt(_Bullet):
+    """btDbvtBroadphase: two dynamic AABB trees (static and moving) with fattened boxes and
+    incremental re-insertion; Bullet's default broad phase."""
+
+    name = "bullet.dbvt"
+
+
+class BulletSimple(_Bullet):
+    """btSimpleBroadphase: Bullet's brute-force broad phase (pybullet's experimental
+    RESET_USE_SIMPLE_BROADPHASE flag), a reference inside the engine."""
+
+    name = "bullet.simple"
+    reset_flags = pybullet.RESET_USE_SIMPLE_BROADPHASE

@@ -1,0 +1,164 @@
+"""Scene generators, the essay's motion, and scene files."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from scenes import DISTRIBUTIONS, ESSAY_BOX, Scene, generate
+from scenes.io import SceneFileError, load_scene, save_scene
+from scenes.motion import kinetic_energy, momentum, simulate
+
+
+@pytest.mark.parametrize("dist", DISTRIBUTIONS)
+def test_generators_are_seeded_inside_the_box_and_at_the_essay_speed(dist):
+    a, b = generate(dist, 500, seed=7), generate(dist, 500, seed=7)
+    np.testing.assert_array_equal(a.positions, b.positions)
+    assert not np.array_equal(a.positions, generate(dist, 500, seed=8).positions)
+    assert a.box == ESSAY_BOX and a.positions.shape == (500, 2) and a.positions.dtype == np.float64
+    assert (a.positions - a.radii[:, None] >= 0).all() and (a.positions + a.radii[:, None] <= 2000).all()
+    np.testing.assert_allclose(np.hypot(*a.velocities.T), 10.0)
+    assert (a.radii == 10.0).all()
+
+
+def test_gaussian_x_clumps_along_x_only():
+    s = generate("gauss_x", 20000, seed=1)
+    assert abs(s.positions[:, 0].std() - 200.0) < 10 and abs(s.positions[:, 0].mean() - 1000.0) < 10
+    assert abs(s.positions[:, 1].std() - 2000 / np.sqrt(12)) < 20
+    t = generate("gauss_y", 20000, seed=1)
+    assert abs(t.positions[:, 1].std() - 200.0) < 10
+
+
+def test_mixed_sizes_are_log_uniform_between_the_bounds():
+    s = generate("uniform", 20000, radii=(1.0, 100.0), seed=2)
+    assert 1.0 <= s.radii.min() and s.radii.max() <= 100.0
+    logs = np.log10(s.radii)
+    assert abs(np.mean(logs < 1.0) - 0.5) < 0.02  # half the radii below the geometric middle
+
+
+def test_circles_larger_than_the_box_sit_in_its_middle():
+    s = generate("uniform", 10, radius=5000.0, seed=0)
+    assert (s.positions == 1000.0).all()
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"dist": "gauss_z"}, "unknown distribution 'gauss_z'"),
+        ({"n": -1}, "n must be a non-negative integer"),
+        ({"radius": -1.0}, "radius must be finite and non-negative"),
+        ({"radii": (5.0, 1.0)}, "radii bounds"),
+        ({"radius": 1.0, "radii": (1.0, 2.0)}, "either radius or radii"),
+        ({"speed": np.nan}, "speed must be finite"),
+        ({"box": (0, 0, -1, 5)}, "box must be finite"),
+    ],
+)
+def test_generator_rejects_bad_values(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        generate(**{"n": 10, **kwargs})
+
+
+def test_same_seed_same_trajectory():
+    a = simulate(generate("clusters", 300, seed=3, speed=500.0), 40)
+    b = simulate(generate("clusters", 300, seed=3, speed=500.0), 40)
+    np.testing.assert_array_equal(a.positions, b.positions)
+
+
+def test_nobody_leaves_the_box_and_energy_is_conserved():
+    scene = generate("clusters", 400, radii=(2.0, 20.0), seed=4, speed=3000.0)
+    traj = simulate(scene, 120)
+    lo = traj.positions - scene.radii[None, :, None]
+    hi = traj.positions + scene.radii[None, :, None]
+    assert (lo >= -1e-9).all() and (hi <= 2000 + 1e-9).all()
+    assert sum(len(c) for c in traj.contacts) > 100  # collisions did happen
+    e0 = kinetic_energy(traj.velocities[0], scene.radii)
+    for v in traj.velocities:
+        assert kinetic_energy(v, scene.radii) == pytest.approx(e0, rel=1e-9)
+
+
+def test_momentum_is_conserved_without_walls():
+    scene = generate("clusters", 400, radii=(2.0, 20.0), seed=5, speed=3000.0, walls=False)
+    traj = simulate(scene, 60)
+    p0 = momentum(traj.velocities[0], scene.radii)
+    assert sum(len(c) for c in traj.contacts) > 50
+    scale = np.abs(scene.radii**2 * 3000.0).sum()
+    for v in traj.velocities:
+        np.testing.assert_allclose(momentum(v, scene.radii), p0, atol=1e-9 * scale)
+
+
+def test_static_and_unresponsive_scenes_do_only_what_they_ask():
+    scene = generate("uniform", 200, seed=6, speed=1000.0, moves=False)
+    traj = simulate(scene, 5)
+    assert (traj.positions == scene.positions).all()
+    ghost = simulate(generate("clusters", 200, seed=6, speed=1000.0, responds=False, walls=False), 5)
+    np.testing.assert_allclose(ghost.positions[4], ghost.positions[0] + 4 * ghost.velocities[0] / 60.0)
+
+
+def test_each_frame_records_its_exact_pairs():
+    traj = simulate(generate("clusters", 300, seed=9, speed=800.0), 10)
+    from own.brute import brute_pairs
+
+    for f in range(traj.frames):
+        np.testing.assert_array_equal(traj.box_pairs[f], brute_pairs(traj.positions[f], traj.scene.radii))
+
+
+def test_scene_validates_its_arrays():
+    with pytest.raises(ValueError, match="radius 1 is negative"):
+        Scene(np.zeros((2, 2)), np.array([1.0, -1.0]), np.zeros((2, 2)))
+    with pytest.raises(ValueError, match="velocities has 1 rows"):
+        Scene(np.zeros((2, 2)), np.ones(2), np.zeros((1, 2)))
+
+
+# --- scene files -------------------------------------------------------------------------
+
+
+def test_save_and_load_round_trip_exactly(tmp_path):
+    scene = generate("gauss_x", 100, radii=(0.1, 30.0), seed=1)
+    path = save_scene(scene, tmp_path / "s.csv")
+    back = load_scene(path)
+    np.testing.assert_array_equal(back.positions, scene.positions)
+    np.testing.assert_array_equal(back.radii, scene.radii)
+    np.testing.assert_array_equal(back.velocities, scene.velocities)
+    assert back.box == scene.box and back.name == "s"
+
+
+def test_a_minimal_user_file_gets_zero_velocities_and_a_bounding_box(tmp_path):
+    path = tmp_path / "mine.csv"
+    path.write_text("x,y,r\n0,0,1\n10,5,2\n\n")
+    scene = load_scene(path)
+    assert scene.n == 2 and (scene.velocities == 0).all()
+    assert scene.box == (-1.0, -1.0, 12.0, 7.0)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("", "empty file"),
+        ("x,y\n1,2\n", "line 1: header must be x,y,r.*missing r"),
+        ("x,y,r,z\n1,2,3,4\n", "line 1: .*unknown z"),
+        ("x,y,r,vx\n1,2,3,4\n", "line 1: give both vx and vy"),
+        ("x,y,r\n1,2,3\n1,2\n", "line 3: expected 3 columns"),
+        ("x,y,r\n1,2,3\n1,2,3,4\n", "line 3: expected 3 columns"),
+        ("x,y,r\n1,abc,3\n", "line 2: column y is not a number: 'abc'"),
+        ("x,y,r\n1,2,3\nnan,2,3\n", "line 3: column x is not finite"),
+        ("x,y,r\n1,2,3\n1,2,inf\n", "line 3: column r is not finite"),
+        ("x,y,r\n1,2,-3\n", "line 2: radius is negative"),
+        ("x,y,r\n", "no circles"),
+        ("# box: 0,0,oops,1\nx,y,r\n1,1,1\n", "line 1: bad box line"),
+        ("# box: 0,0,1,1\nx,y,r\n1,1,1\n2,2,x\n", "line 4: column r is not a number"),
+    ],
+)
+def test_bad_scene_files_name_the_line_and_the_problem(tmp_path, text, message):
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    with pytest.raises(SceneFileError, match=message) as err:
+        load_scene(path)
+    assert str(path) in str(err.value)
+
+
+def test_missing_and_unreadable_files(tmp_path):
+    with pytest.raises(SceneFileError, match="no such file"):
+        load_scene(tmp_path / "nope.csv")
+    (tmp_path / "bin.csv").write_bytes(b"\xff\xfe\x00x")
+    with pytest.raises(SceneFileError, match="cannot be read"):
+        load_scene(tmp_path / "bin.csv")
