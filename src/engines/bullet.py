@@ -32,6 +32,8 @@ class _Bullet(BroadPhase):
         return fn(*args, physicsClientId=self._client, **kwargs)
 
     def _reset(self, positions, radii):
+        if self.n and radii.min() == 0.0:
+            raise ValueError(f"{self.name}: Bullet cannot create a sphere of radius 0 (object {int(radii.argmin())})")
         self._call(pybullet.resetSimulation, self.reset_flags)
         self._call(pybullet.setGravity, 0.0, 0.0, 0.0)
         # One collision shape per distinct radius, shared by the bodies of that size.

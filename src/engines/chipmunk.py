@@ -33,7 +33,7 @@ class _Chipmunk(BroadPhase):
         if self.params["shape"] == "circle":
             self.reports = "contacts"
 
-    def _configure(self, space: pymunk.Space) -> None:
+    def _configure(self, space: pymunk.Space, positions: np.ndarray, radii: np.ndarray) -> None:
         """Choose the spatial index (the tree is Chipmunk's default)."""
 
     def _reset(self, positions, radii):
@@ -42,7 +42,7 @@ class _Chipmunk(BroadPhase):
         space.iterations = 1  # sensors never reach the solver; keep its loop minimal anyway
         # Drop an arbiter as soon as its pair stops colliding: the default (3 steps) reports stale pairs.
         space.collision_persistence = 1
-        self._configure(space)
+        self._configure(space, positions, radii)
         items = []
         for (x, y), r in zip(positions.tolist(), radii.tolist()):
             body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
@@ -106,10 +106,12 @@ class ChipmunkHash(_Chipmunk):
     name = "chipmunk.hash"
     defaults = {"shape": "box", "dim": None, "count": None}
 
-    def _configure(self, space):
+    def _configure(self, space, positions, radii):
         dim = self.params["dim"]
         if dim is None:
-            dim = 4.0 * float(self.radii.mean()) if self.n else 1.0
+            mean_r = float(radii.mean()) if self.n else 0.0
+            spacing = float(np.ptp(positions, axis=0).max()) / np.sqrt(self.n) if self.n else 0.0
+            dim = 4.0 * mean_r or spacing or 1.0  # zero radii: the mean spacing of the objects
         count = self.params["count"] if self.params["count"] is not None else max(1000, 10 * self.n)
         if not (np.isfinite(dim) and dim > 0):
             raise ValueError(f"{self.name}: dim must be a positive size, got {dim!r}")
