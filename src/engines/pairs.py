@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
 from .base import EMPTY_PAIRS, PairArray
@@ -54,14 +55,17 @@ def is_canonical(pairs: np.ndarray, n: int) -> str | None:
     return None
 
 
+@nb.njit(cache=True)
 def circles_overlap(positions: np.ndarray, radii: np.ndarray, pairs: np.ndarray) -> np.ndarray:
     """The exact narrow phase shared by every backend: distance <= r_i + r_j (touching counts)."""
-    if len(pairs) == 0:
-        return np.zeros(0, dtype=bool)
-    i, j = pairs[:, 0], pairs[:, 1]
-    d = positions[j] - positions[i]
-    reach = radii[i] + radii[j]
-    return d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] <= reach * reach
+    hit = np.empty(pairs.shape[0], dtype=np.bool_)
+    for k in range(pairs.shape[0]):
+        i, j = pairs[k, 0], pairs[k, 1]
+        dx = positions[j, 0] - positions[i, 0]
+        dy = positions[j, 1] - positions[i, 1]
+        reach = radii[i] + radii[j]
+        hit[k] = dx * dx + dy * dy <= reach * reach
+    return hit
 
 
 def narrow_phase(positions: np.ndarray, radii: np.ndarray, pairs: np.ndarray) -> PairArray:

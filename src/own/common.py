@@ -10,17 +10,28 @@ import numba as nb
 import numpy as np
 
 
+@nb.njit(cache=True)
 def boxes(positions: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Lower and upper corners (n, 2) of the circles' axis-aligned boxes."""
-    r = radii[:, None]
-    return positions - r, positions + r
+    lo = np.empty_like(positions)
+    hi = np.empty_like(positions)
+    for i in range(positions.shape[0]):
+        for a in range(2):
+            lo[i, a] = positions[i, a] - radii[i]
+            hi[i, a] = positions[i, a] + radii[i]
+    return lo, hi
 
 
-def extents(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The box around all boxes; (0, 0)-(1, 1) for an empty scene."""
+@nb.njit(cache=True)
+def extents(lo: np.ndarray, hi: np.ndarray) -> tuple[float, float, float, float]:
+    """(xmin, ymin, xmax, ymax) around all boxes; (0, 0, 1, 1) for an empty scene."""
     if lo.shape[0] == 0:
-        return np.zeros(2), np.ones(2)
-    return lo.min(axis=0), hi.max(axis=0)
+        return 0.0, 0.0, 1.0, 1.0
+    x0, y0, x1, y1 = lo[0, 0], lo[0, 1], hi[0, 0], hi[0, 1]
+    for i in range(1, lo.shape[0]):
+        x0, y0 = min(x0, lo[i, 0]), min(y0, lo[i, 1])
+        x1, y1 = max(x1, hi[i, 0]), max(y1, hi[i, 1])
+    return x0, y0, x1, y1
 
 
 @nb.njit(cache=True, inline="always")

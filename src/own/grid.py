@@ -7,6 +7,8 @@ the grid, so objects anywhere (even far outside the scene's box) are handled.
 
 from __future__ import annotations
 
+import math
+
 import numba as nb
 import numpy as np
 
@@ -105,27 +107,26 @@ class UniformGrid(BroadPhase):
 
     def _layout(self, lo, hi):
         """Origin, inverse cell sizes and cell counts for this frame's extents."""
-        low, high = extents(lo, hi)
-        span = high - low
-        span = np.where(span > 0, span, 1.0)  # all boxes at one coordinate: any cell size works
+        x0, y0, x1, y1 = extents(lo, hi)
+        # All boxes at one coordinate: any cell size works.
+        span_x, span_y = (x1 - x0) or 1.0, (y1 - y0) or 1.0
         p, cell = self.params["p"], self.params["cell"]
         if p is not None:
-            nx = ny = int(p)
-            size = span / p
-        else:
-            mean_r = float(self.radii.mean()) if self.n else 0.0
-            c = float(cell) if cell is not None else 4.0 * mean_r
-            c = max(c, float(span.max()) * 1e-9)
-            # Never more than MAX_CELLS_PER_OBJECT * n cells (also covers zero radii).
-            cap = MAX_CELLS_PER_OBJECT * max(self.n, 1) + 16
-            while np.prod(np.ceil(span / c)) > cap:
-                c *= 1.25
-            nx, ny = (int(v) for v in np.ceil(span / c).clip(1))
-            size = np.array([c, c])
-        return float(low[0]), float(low[1]), 1.0 / size[0], 1.0 / size[1], nx, ny
+            return x0, y0, p / span_x, p / span_y, int(p), int(p)
+        c = float(cell) if cell is not None else 4.0 * self._mean_radius
+        c = max(c, max(span_x, span_y) * 1e-9)
+        # Never more than MAX_CELLS_PER_OBJECT * n cells (also covers zero radii).
+        cap = MAX_CELLS_PER_OBJECT * max(self.n, 1) + 16
+        while math.ceil(span_x / c) * math.ceil(span_y / c) > cap:
+            c *= 1.25
+        return x0, y0, 1.0 / c, 1.0 / c, max(1, math.ceil(span_x / c)), max(1, math.ceil(span_y / c))
 
     def _reset(self, positions, radii):
-        self._lo, self._hi = boxes(positions, radii)
+        self._mean_radius = float(radii.mean()) if self.n else 0.0
+        self._update(positions)
+
+    def _update(self, positions):
+        self._lo, self._hi = boxes(positions, self.radii)
         self._layout_now = self._layout(self._lo, self._hi)
         self._start, self._entries = grid_build(self._lo, self._hi, *self._layout_now)
 

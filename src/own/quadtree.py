@@ -160,12 +160,11 @@ class Quadtree(BroadPhase):
 
     def _reset(self, positions, radii):
         self._lo, self._hi = boxes(positions, radii)
-        low, high = extents(self._lo, self._hi)
+        x0, y0, x1, y1 = extents(self._lo, self._hi)
         # A square root region; max() keeps it holding every box whatever x0 + size rounds to.
-        size = float((high - low).max())
-        x1, y1 = max(low[0] + size, high[0]), max(low[1] + size, high[1])
+        size = max(x1 - x0, y1 - y0)
         self._nodes, self._bounds, self._perm = quadtree_build(
-            self._lo, self._hi, float(low[0]), float(low[1]), float(x1), float(y1),
+            self._lo, self._hi, x0, y0, max(x0 + size, x1), max(y0 + size, y1),
             self._capacity, self._max_depth,
         )
 

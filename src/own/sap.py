@@ -18,10 +18,20 @@ def sweep_axis(positions: np.ndarray, axis: str) -> int:
         return 0
     if axis == "y":
         return 1
-    if positions.shape[0] < 2:
-        return 0
-    var = positions.var(axis=0)
-    return int(var[1] > var[0])
+    return int(_y_varies_more(positions))
+
+
+@nb.njit(cache=True)
+def _y_varies_more(positions: np.ndarray) -> bool:
+    n = positions.shape[0]
+    if n < 2:
+        return False
+    mean_x, mean_y = positions[:, 0].mean(), positions[:, 1].mean()
+    var_x = var_y = 0.0
+    for i in range(n):
+        var_x += (positions[i, 0] - mean_x) ** 2
+        var_y += (positions[i, 1] - mean_y) ** 2
+    return var_y > var_x
 
 
 @nb.njit(cache=True)

@@ -1,0 +1,1 @@
+"""Runnable experiments: `python -m studies.compare`, and the shared harness they use."""

@@ -1,0 +1,182 @@
+"""Run one backend over a precomputed trajectory and measure every frame; isolated in a child.
+
+Each backend runs in a forked child process that inherits the trajectory, so an engine that
+segfaults or hangs is recorded as that backend's outcome ("crashed: signal 11", "timeout after
+120 s") and the study goes on. Rows come back after every repeat, so nothing measured is lost.
+"""
+
+from __future__ import annotations
+
+import faulthandler
+import gc
+import multiprocessing as mp
+import signal
+import time
+import traceback
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+import engines
+from engines.pairs import keys, narrow_phase
+from scenes.motion import Trajectory
+
+COLUMNS = [
+    "backend", "params", "scene", "dist", "n", "radius_min", "radius_max", "seed", "repeat", "frame",
+    "t_update_s", "t_pairs_s", "t_narrow_s", "t_total_s", "candidates", "true_pairs", "missed",
+    "false_positives", "box_pairs", "box_missed", "reports", "t_setup_s", "status",
+]
+
+
+@dataclass
+class Job:
+    """One backend with its parameters, run `repeats` times over frames 1.. of the trajectory."""
+
+    backend: str
+    params: dict[str, Any] = field(default_factory=dict)
+    repeats: int = 1
+    budget_s: float = float("inf")  # a first timed frame slower than this stops the backend
+    timeout_s: float = 600.0
+
+
+def _count(frame: int, traj: Trajectory, candidates: np.ndarray, reports: str) -> dict[str, Any]:
+    """Missed and extra pairs of one frame against the exact reference."""
+    n = traj.scene.n
+    got = keys(candidates, n)
+    truth = keys(traj.contacts[frame], n)
+    boxes = keys(traj.box_pairs[frame], n)
+    found_true = np.isin(truth, got, assume_unique=True).sum()
+    return {
+        "candidates": len(got),
+        "true_pairs": len(truth),
+        "missed": int(len(truth) - found_true),
+        "false_positives": int(len(got) - found_true),
+        "box_pairs": len(boxes),
+        # Only "boxes" backends promise every overlapping box; engines that report contacts
+        # ran their own narrow phase first, so box-only overlaps are not theirs to report.
+        "box_missed": int(len(boxes) - np.isin(boxes, got, assume_unique=True).sum()) if reports == "boxes" else None,
+    }
+
+
+def measure(job: Job, traj: Trajectory, repeat: int) -> list[dict[str, Any]]:
+    """Rows for one repeat: frame 0 is the untimed warm-up (build, JIT compile), then frames 1..F.
+
+    A first timed frame over the job's budget is kept with a "skipped" status and ends the repeat.
+    """
+    radii = traj.scene.radii
+    backend = engines.create(job.backend, **job.params)
+    try:
+        start = time.perf_counter()
+        backend.reset(traj.positions[0], radii)
+        backend.update(traj.positions[0])
+        narrow_phase(traj.positions[0], radii, backend.pairs())
+        setup = time.perf_counter() - start
+        rows = []
+        gc.collect()
+        gc.disable()  # a collection inside a timed frame would be noise, not the backend's cost
+        try:
+            for f in range(1, traj.frames):
+                pos = traj.positions[f]
+                t0 = time.perf_counter()
+                backend.update(pos)
+                t1 = time.perf_counter()
+                candidates = backend.pairs()
+                t2 = time.perf_counter()
+                narrow_phase(pos, radii, candidates)
+                t3 = time.perf_counter()
+                rows.append({
+                    "repeat": repeat, "frame": f, "t_update_s": t1 - t0, "t_pairs_s": t2 - t1,
+                    "t_narrow_s": t3 - t2, "t_total_s": t3 - t0, "t_setup_s": setup,
+                    "reports": backend.reports, "params": backend.describe(), "status": "ok",
+                    **_count(f, traj, candidates, backend.reports),
+                })
+                if f == 1 and t3 - t0 > job.budget_s:
+                    rows[-1]["status"] = (f"skipped: a frame took {t3 - t0:.3g} s, over the budget of "
+                                          f"{job.budget_s:.3g} s per frame")
+                    break
+        finally:
+            gc.enable()
+        return rows
+    finally:
+        backend.close()
+
+
+# The trajectory of the current run; forked children inherit it without pickling.
+_TRAJECTORY: Trajectory | None = None
+
+
+def _child(job: Job, conn) -> None:
+    """Child process: send ("rows", rows) per repeat, then ("done", None) or ("failed", message)."""
+    faulthandler.disable()  # a crash is recorded by its signal; an inherited traceback dump is noise
+    try:
+        for r in range(job.repeats):
+            rows = measure(job, _TRAJECTORY, r)
+            conn.send(("rows", rows))
+            if rows and rows[-1]["status"] != "ok":  # over budget: no further repeats
+                conn.send(("failed", rows[-1]["status"]))
+                return
+        conn.send(("done", None))
+    except Exception as exc:  # an engine error is a result of the study, not a crash of it
+        last = traceback.extract_tb(exc.__traceback__)[-1]
+        conn.send(("failed", f"error: {type(exc).__name__}: {exc} (at {last.name})".replace("\n", " ")))
+    finally:
+        conn.close()
+
+
+@dataclass
+class Outcome:
+    backend: str
+    status: str  # "ok", "skipped: ...", "error: ...", "crashed: signal N", "timeout after S s"
+    rows: list[dict[str, Any]]
+
+
+def run_isolated(job: Job, traj: Trajectory, on_rows: Callable[[list[dict]], None] | None = None) -> Outcome:
+    """Run `job` in a forked child; rows are passed to `on_rows` as each repeat finishes."""
+    global _TRAJECTORY
+    _TRAJECTORY = traj
+    ctx = mp.get_context("fork")
+    parent, child = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_child, args=(job, child), daemon=True)
+    proc.start()
+    child.close()
+    rows: list[dict] = []
+    status = None
+    deadline = time.monotonic() + job.timeout_s
+    while status is None:
+        remaining = deadline - time.monotonic()
+        if remaining <= 0:
+            proc.kill()
+            status = f"timeout after {job.timeout_s:g} s"
+            break
+        if not parent.poll(min(remaining, 0.5)):
+            continue
+        try:
+            kind, payload = parent.recv()
+        except EOFError:  # the child is gone without saying it finished
+            proc.join()
+            status = _crash_status(proc.exitcode)
+            break
+        if kind == "rows":
+            rows += payload
+            if on_rows:
+                on_rows(payload)
+        else:
+            status = "ok" if kind == "done" else payload
+    proc.join(timeout=5)
+    parent.close()
+    return Outcome(job.backend, status, rows)
+
+
+def _crash_status(code: int | None) -> str:
+    if code is not None and code < 0:
+        return f"crashed: signal {-code} ({signal.Signals(-code).name})"
+    return f"crashed: exit status {code}"
+
+
+def scene_columns(traj: Trajectory) -> dict[str, Any]:
+    """The columns that describe the scene, the same on every row of a run."""
+    s = traj.scene
+    r_min, r_max = s.radius_range
+    return {"scene": s.name, "dist": s.meta.get("dist", ""), "n": s.n,
+            "radius_min": r_min, "radius_max": r_max, "seed": s.meta.get("seed", "")}

@@ -1,0 +1,95 @@
+"""From tidy rows to what a reader looks at: the per-backend table and the error-vs-time figure."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+STAGES = ["update", "pairs", "narrow", "total"]
+# One colour per family, stable across runs; red is kept for backends that missed pairs.
+FAMILY_COLOURS = {"own": "tab:blue", "essay": "tab:orange", "chipmunk": "tab:green", "bullet": "tab:purple",
+                  "fcl": "tab:brown", "coal": "tab:pink", "scipy": "tab:olive"}
+
+
+def _iqr(x: pd.Series) -> float:
+    return float(x.quantile(0.75) - x.quantile(0.25))
+
+
+def summarise(rows: pd.DataFrame) -> pd.DataFrame:
+    """One row per backend: median and IQR of each stage (ms), candidates per true pair, misses."""
+    ok = rows[rows["status"] == "ok"]
+    if ok.empty:
+        return pd.DataFrame()
+    g = ok.groupby("backend", sort=False)
+    table = pd.DataFrame({"reports": g["reports"].first(), "frames": g.size()})
+    for stage in STAGES:
+        ms = ok[f"t_{stage}_s"] * 1e3
+        table[f"{stage}_ms"] = ms.groupby(ok["backend"]).median()
+        table[f"{stage}_iqr_ms"] = ms.groupby(ok["backend"]).agg(_iqr)
+    true = g["true_pairs"].sum()
+    table["cand_per_true"] = g["candidates"].sum() / true.where(true > 0)
+    table["missed"] = g["missed"].sum()
+    table["box_missed"] = g["box_missed"].sum(min_count=1)
+    table["setup_s"] = g["t_setup_s"].median()
+    return table.sort_values("total_ms")
+
+
+def add_speedup(table: pd.DataFrame, baseline_prefix: str = "essay.") -> str | None:
+    """Speed-up against the fastest essay-method backend that ran; returns its name."""
+    base = [b for b in table.index if b.startswith(baseline_prefix)]
+    if not base:
+        return None
+    fastest = min(base, key=lambda b: table.loc[b, "total_ms"])
+    table["speedup"] = table.loc[fastest, "total_ms"] / table["total_ms"]
+    return fastest
+
+
+def _ms(value: float, spread: float) -> str:
+    return f"{value:9.3f} ±{spread:<7.3f}" if value < 100 else f"{value:9.1f} ±{spread:<7.1f}"
+
+
+def format_table(table: pd.DataFrame, baseline: str | None) -> str:
+    """A fixed-width text table sorted by total time per frame."""
+    head = (f"{'backend':<17} {'reports':<8} {'update ms':>17} {'pairs ms':>17} {'narrow ms':>17} "
+            f"{'total ms':>17} {'cand/true':>9} {'missed':>6}")
+    if baseline:
+        head += f" {'x ' + baseline:>16}"
+    lines = [head, "-" * len(head)]
+    for name, r in table.iterrows():
+        missed = int(r["missed"]) + (0 if pd.isna(r["box_missed"]) else int(r["box_missed"]))
+        line = (f"{name:<17} {r['reports']:<8} " + " ".join(_ms(r[f"{s}_ms"], r[f"{s}_iqr_ms"]) for s in STAGES)
+                + f" {r['cand_per_true']:9.2f} {missed:6d}" + ("  <- MISSED PAIRS" if missed else ""))
+        if baseline:
+            line += f" {r['speedup']:15.1f}x"
+        lines.append(line)
+    return "\n".join(lines)
+
+
+def plot_error_vs_time(table: pd.DataFrame, path: Path, title: str) -> None:
+    """x: median time per frame; y: candidates per true pair; a red cross for any backend that missed."""
+    fig, ax = plt.subplots(figsize=(9, 6), dpi=120)
+    for name, r in table.iterrows():
+        missed = r["missed"] > 0 or (not pd.isna(r["box_missed"]) and r["box_missed"] > 0)
+        y = r["cand_per_true"] if np.isfinite(r["cand_per_true"]) else 1.0
+        colour = "red" if missed else FAMILY_COLOURS.get(name.split(".")[0], "tab:gray")
+        ax.scatter(r["total_ms"], y, s=60, marker="X" if missed else "o", color=colour, zorder=3,
+                   label="missed pairs" if missed else None)
+        ax.annotate(name, (r["total_ms"], y), textcoords="offset points", xytext=(5, 4), fontsize=8)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("median time per frame, update + pairs + narrow phase (ms)")
+    ax.set_ylabel("candidates per truly overlapping pair")
+    ax.set_title(title, fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    handles, labels = ax.get_legend_handles_labels()
+    if labels:
+        ax.legend(handles[:1], labels[:1], loc="upper right")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
