@@ -31,22 +31,6 @@ def zero_radius(positions, radii):
     return len(radii) > 0 and bool((radii == 0).any())
 
 
-def mixed_radii(positions, radii):
-    return len(radii) > 0 and radii.max() != radii.min()
-
-
-def exact_touching(positions, radii):
-    """Some pair's boxes or circles touch exactly (no overlap of positive size)."""
-    pairs = box_pairs(positions, radii)
-    if len(pairs) == 0:
-        return False
-    i, j = pairs[:, 0], pairs[:, 1]
-    lo, hi = positions - radii[:, None], positions + radii[:, None]
-    d = positions[j] - positions[i]
-    reach = radii[i] + radii[j]
-    return bool(((lo[j] == hi[i]) | (lo[i] == hi[j])).any() or ((d**2).sum(axis=1) == reach**2).any())
-
-
 # Engine -> inputs it mishandles (each shown by an evidence test below).
 LIMITATIONS = {
     "bullet.dbvt": [zero_radius],
@@ -54,8 +38,11 @@ LIMITATIONS = {
     "coal.tree": [zero_radius],
     "coal.interval": [zero_radius],
     "coal.hash": [zero_radius],
-    "coal.sap": [zero_radius, mixed_radii, exact_touching],
 }
+# Engines that miss pairs on ordinary scenes: left out of the general tests, their failures
+# pinned by the evidence tests (and reported by the studies).
+UNRELIABLE = {"coal.sap": "misses overlaps depending on the order objects were registered in"}
+RELIABLE = [n for n in ENGINES if n not in UNRELIABLE]
 
 
 def make(name, **params):
@@ -82,7 +69,7 @@ def within_limits(name, positions, radii):
     return not any(applies(positions, radii) for applies in LIMITATIONS.get(name, []))
 
 
-@pytest.mark.parametrize("name", ENGINES)
+@pytest.mark.parametrize("name", RELIABLE)
 @settings(max_examples=30)
 @given(scene=any_scene)
 def test_engine_never_misses_on_random_and_adversarial_scenes(name, scene):
@@ -96,11 +83,10 @@ def test_engine_never_misses_on_random_and_adversarial_scenes(name, scene):
         backend.close()
 
 
-@pytest.mark.parametrize("name", ENGINES)
+@pytest.mark.parametrize("name", RELIABLE)
 @pytest.mark.parametrize("dist", ["uniform", "gauss_x", "gauss_y", "clusters"])
 def test_engine_stays_correct_across_update_frames(name, dist):
-    sizes = {"radius": 10.0} if mixed_radii in LIMITATIONS.get(name, []) else {"radii": (2.0, 30.0)}
-    traj = simulate(generate(dist, 300, seed=11, speed=3000.0, **sizes), frames=15)
+    traj = simulate(generate(dist, 300, seed=11, speed=3000.0, radii=(2.0, 30.0)), frames=15)
     backend = make(name)
     try:
         backend.reset(traj.positions[0], traj.scene.radii)
@@ -111,7 +97,7 @@ def test_engine_stays_correct_across_update_frames(name, dist):
         backend.close()
 
 
-@pytest.mark.parametrize("name", [n for n in ENGINES if exact_touching not in LIMITATIONS.get(n, [])])
+@pytest.mark.parametrize("name", RELIABLE)
 def test_engine_reports_touching_boxes_or_circles(name):
     # Two circles that touch exactly: their boxes and the circles themselves touch.
     backend = make(name)
@@ -126,21 +112,22 @@ def test_engine_reports_touching_boxes_or_circles(name):
 
 
 @pytest.mark.engine_limitation
-def test_coal_sap_misses_an_overlap_when_the_larger_sphere_is_registered_first():
-    # Spheres r = 42 at x = 0 and r = 10 at x = 50 overlap (distance 50 < 52).
+@pytest.mark.parametrize(
+    ("left", "right"),
+    [
+        (([0.0, 0.0], 5.0), ([3.0, 0.0], 5.0)),  # equal spheres, 3 apart, radius 5
+        (([0.0, 0.0], 5.0), ([3.0, 3.0], 5.0)),
+        (([0.0, 0.0], 42.0), ([50.0, 0.0], 10.0)),  # different sizes
+    ],
+)
+def test_coal_sap_misses_an_overlap_when_the_left_sphere_is_registered_first(left, right):
+    (p, r), (q, s) = left, right
     first = make("coal.sap")
-    first.reset([[0.0, 0.0], [50.0, 0.0]], [42.0, 10.0])
+    first.reset([p, q], [r, s])
     assert first.pairs().tolist() == []  # missed
     swapped = make("coal.sap")
-    swapped.reset([[50.0, 0.0], [0.0, 0.0]], [10.0, 42.0])
+    swapped.reset([q, p], [s, r])
     assert swapped.pairs().tolist() == [[0, 1]]  # found in the other order
-
-
-@pytest.mark.engine_limitation
-def test_coal_sap_misses_exactly_touching_spheres():
-    backend = make("coal.sap")
-    backend.reset([[0.0, 0.0], [2.0, 0.0], [2.0, 1.5]], [1.0, 1.0, 1.0])
-    assert backend.pairs().tolist() == [[1, 2]]  # (0, 1) touch at one point and are missed
 
 
 @pytest.mark.engine_limitation
