@@ -57,39 +57,58 @@ def _ms(value: float, spread: float) -> str:
 def format_table(table: pd.DataFrame, baseline: str | None) -> str:
     """A fixed-width text table sorted by total time per frame."""
     head = (f"{'backend':<17} {'reports':<8} {'update ms':>17} {'pairs ms':>17} {'narrow ms':>17} "
-            f"{'total ms':>17} {'cand/true':>9} {'missed':>6}")
+            f"{'total ms':>17} {'cand/true':>9} {'missed':>6} {'setup s':>7}")
     if baseline:
         head += f" {'x ' + baseline:>16}"
     lines = [head, "-" * len(head)]
     for name, r in table.iterrows():
         missed = int(r["missed"]) + (0 if pd.isna(r["box_missed"]) else int(r["box_missed"]))
         line = (f"{name:<17} {r['reports']:<8} " + " ".join(_ms(r[f"{s}_ms"], r[f"{s}_iqr_ms"]) for s in STAGES)
-                + f" {r['cand_per_true']:9.2f} {missed:6d}" + ("  <- MISSED PAIRS" if missed else ""))
+                + f" {r['cand_per_true']:9.2f} {missed:6d} {r['setup_s']:7.2f}")
         if baseline:
             line += f" {r['speedup']:15.1f}x"
-        lines.append(line)
+        lines.append(line + ("  <- MISSED PAIRS" if missed else ""))
     return "\n".join(lines)
+
+
+def _label_offsets(table: pd.DataFrame, ys: pd.Series) -> dict[str, tuple[int, int]]:
+    """Stagger labels of points that share a height (e.g. every engine at 1 candidate per pair)."""
+    offsets = {}
+    band = np.round(np.log10(ys.astype(float)) * 20)
+    for _, names in table.groupby(band).groups.items():
+        ordered = sorted(names, key=lambda n: table.loc[n, "total_ms"])
+        for k, name in enumerate(ordered):
+            offsets[name] = (4, 6 + 11 * (k % 4)) if k % 2 == 0 else (4, -12 - 11 * (k % 4))
+    return offsets
 
 
 def plot_error_vs_time(table: pd.DataFrame, path: Path, title: str) -> None:
     """x: median time per frame; y: candidates per true pair; a red cross for any backend that missed."""
-    fig, ax = plt.subplots(figsize=(9, 6), dpi=120)
+    fig, ax = plt.subplots(figsize=(10, 6.5), dpi=120)
+    ys = table["cand_per_true"].where(np.isfinite(table["cand_per_true"]), 1.0)
+    offsets = _label_offsets(table, ys)
     for name, r in table.iterrows():
         missed = r["missed"] > 0 or (not pd.isna(r["box_missed"]) and r["box_missed"] > 0)
-        y = r["cand_per_true"] if np.isfinite(r["cand_per_true"]) else 1.0
         colour = "red" if missed else FAMILY_COLOURS.get(name.split(".")[0], "tab:gray")
-        ax.scatter(r["total_ms"], y, s=60, marker="X" if missed else "o", color=colour, zorder=3,
-                   label="missed pairs" if missed else None)
-        ax.annotate(name, (r["total_ms"], y), textcoords="offset points", xytext=(5, 4), fontsize=8)
+        marker = "X" if missed else ("s" if r["reports"] == "contacts" else "o")
+        ax.scatter(r["total_ms"], ys[name], s=60, marker=marker, color=colour, zorder=3)
+        ax.annotate(name, (r["total_ms"], ys[name]), textcoords="offset points", xytext=offsets[name],
+                    fontsize=8, arrowprops={"arrowstyle": "-", "lw": 0.4, "color": "0.5"})
     ax.set_xscale("log")
     ax.set_yscale("log")
+    ax.set_ylim(ys.min() / 1.6, ys.max() * 1.6)
     ax.set_xlabel("median time per frame, update + pairs + narrow phase (ms)")
     ax.set_ylabel("candidates per truly overlapping pair")
     ax.set_title(title, fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
-    handles, labels = ax.get_legend_handles_labels()
-    if labels:
-        ax.legend(handles[:1], labels[:1], loc="upper right")
+    families = sorted({n.split(".")[0] for n in table.index})
+    handles = [plt.Line2D([], [], ls="", marker="o", color=FAMILY_COLOURS.get(f, "tab:gray"), label=f) for f in families]
+    handles += [
+        plt.Line2D([], [], ls="", marker="o", color="0.4", label="reports overlapping boxes"),
+        plt.Line2D([], [], ls="", marker="s", color="0.4", label="reports contacts (engine's narrow phase ran)"),
+        plt.Line2D([], [], ls="", marker="X", color="red", label="missed pairs"),
+    ]
+    ax.legend(handles=handles, loc="upper left", fontsize=8, framealpha=0.9)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

@@ -10,8 +10,27 @@ come back as false positives, not errors.
 
 from __future__ import annotations
 
+import os
+import sys
+
 import numpy as np
-import pybullet
+
+
+def _import_quietly():
+    """pybullet prints its build time to the C-level stdout on import; keep tables clean."""
+    sys.stdout.flush()
+    saved, devnull = os.dup(1), os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, 1)
+    try:
+        import pybullet
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(devnull)
+    return pybullet
+
+
+pybullet = _import_quietly()
 
 from .base import BroadPhase
 from .pairs import canonical
