@@ -19,6 +19,8 @@ EXACT = [
     ("own.sap", {"axis": "x"}),
     ("own.sap", {"axis": "y"}),
     ("own.sap", {"axis": "auto"}),
+    ("own.sap_incremental", {}),
+    ("own.sap", {"axis": "x", "incremental": True}),
     ("own.grid", {}),
     ("own.grid", {"p": 1}),
     ("own.grid", {"p": 7}),
@@ -126,3 +128,17 @@ def test_grid_reports_each_pair_once_with_many_shared_cells():
     grid.reset([[0.0, 0.0], [3.0, 3.0]], [10.0, 10.0])
     assert grid.pairs().tolist() == [[0, 1]]
     assert grid.stats()["tests"] > 100
+
+
+def test_incremental_sap_repairs_small_motion_and_resorts_after_large():
+    traj = simulate(generate("uniform", 500, seed=2, speed=30.0), frames=5)
+    sap = engines.create("own.sap_incremental")
+    sap.reset(traj.positions[0], traj.scene.radii)
+    assert sap.stats()["swaps"] == -1  # the first frame is a full sort
+    sap.update(traj.positions[1])
+    assert 0 <= sap.stats()["swaps"] < 500  # a cheap repair
+    shuffled = np.random.default_rng(0).permutation(traj.positions[2])
+    sap.update(shuffled)
+    assert sap.stats()["swaps"] == -1  # too much motion: sorted from scratch
+    assert set(map(tuple, sap.pairs().tolist())) == set(map(tuple, brute_pairs(shuffled, traj.scene.radii).tolist()))
+    sap.validate()

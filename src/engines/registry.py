@@ -15,6 +15,7 @@ from .base import BroadPhase
 BACKENDS: dict[str, str] = {
     "own.brute": "own.brute:Brute",
     "own.sap": "own.sap:SweepAndPrune",
+    "own.sap_incremental": "own.sap:IncrementalSweepAndPrune",
     "own.grid": "own.grid:UniformGrid",
     "own.quadtree": "own.quadtree:Quadtree",
     "essay.sap": "own.essay.sap:EssaySweepAndPrune",

@@ -14,7 +14,7 @@ import numpy as np
 
 from engines.base import BroadPhase
 
-from .common import boxes, extents, overlap, push
+from .common import PairCollector, boxes, emit, extents, overlap
 
 # Cap on cells per object when the cell size is derived or given: beyond it cells are enlarged,
 # so tiny radii in a huge box cannot allocate an unbounded grid (an explicit p is taken as given).
@@ -33,35 +33,60 @@ def cell_of(v: float, origin: float, inv: float, m: int) -> int:
 
 
 @nb.njit(cache=True)
-def grid_build(lo, hi, ox, oy, inv_x, inv_y, nx, ny):
-    """Counting sort of objects into cells: cell c holds entries[start[c]:start[c + 1]], ids ascending."""
-    n = lo.shape[0]
+def grid_layout(x0, y0, x1, y1, p, cell, max_cells):
+    """(origin x, origin y, 1 / cell width, 1 / cell height, nx, ny) over the extents.
+
+    p > 0 gives p x p cells; otherwise square cells of size `cell`, enlarged until there are at
+    most `max_cells`. All boxes at one coordinate (zero extent): any cell size works.
+    """
+    span_x = x1 - x0 if x1 > x0 else 1.0
+    span_y = y1 - y0 if y1 > y0 else 1.0
+    if p > 0:
+        return x0, y0, p / span_x, p / span_y, p, p
+    c = max(cell, max(span_x, span_y) * 1e-9)
+    while math.ceil(span_x / c) * math.ceil(span_y / c) > max_cells:
+        c *= 1.25
+    return x0, y0, 1.0 / c, 1.0 / c, max(1, math.ceil(span_x / c)), max(1, math.ceil(span_y / c))
+
+
+@nb.njit(cache=True)
+def grid_build(positions, radii, p, cell, max_cells):
+    """Boxes, layout, and a counting sort of objects into every cell their box covers.
+
+    Cell c holds entries[start[c]:start[c + 1]], object ids ascending.
+    """
+    n = positions.shape[0]
+    lo, hi = boxes(positions, radii)
+    x0, y0, x1, y1 = extents(lo, hi)
+    layout = grid_layout(x0, y0, x1, y1, p, cell, max_cells)
+    ox, oy, inv_x, inv_y, nx, ny = layout
+    span = np.empty((n, 4), dtype=np.int64)  # covered cell range per object, computed once
     start = np.zeros(nx * ny + 1, dtype=np.int64)
     for i in range(n):
-        x0, x1 = cell_of(lo[i, 0], ox, inv_x, nx), cell_of(hi[i, 0], ox, inv_x, nx)
-        y0, y1 = cell_of(lo[i, 1], oy, inv_y, ny), cell_of(hi[i, 1], oy, inv_y, ny)
-        for cy in range(y0, y1 + 1):
-            for cx in range(x0, x1 + 1):
+        cx0, cx1 = cell_of(lo[i, 0], ox, inv_x, nx), cell_of(hi[i, 0], ox, inv_x, nx)
+        cy0, cy1 = cell_of(lo[i, 1], oy, inv_y, ny), cell_of(hi[i, 1], oy, inv_y, ny)
+        span[i, 0], span[i, 1], span[i, 2], span[i, 3] = cx0, cx1, cy0, cy1
+        for cy in range(cy0, cy1 + 1):
+            for cx in range(cx0, cx1 + 1):
                 start[cy * nx + cx + 1] += 1
     for c in range(nx * ny):
         start[c + 1] += start[c]
     entries = np.empty(start[nx * ny], dtype=np.int64)
     fill = start[:-1].copy()
     for i in range(n):
-        x0, x1 = cell_of(lo[i, 0], ox, inv_x, nx), cell_of(hi[i, 0], ox, inv_x, nx)
-        y0, y1 = cell_of(lo[i, 1], oy, inv_y, ny), cell_of(hi[i, 1], oy, inv_y, ny)
-        for cy in range(y0, y1 + 1):
-            for cx in range(x0, x1 + 1):
+        for cy in range(span[i, 2], span[i, 3] + 1):
+            for cx in range(span[i, 0], span[i, 1] + 1):
                 c = cy * nx + cx
                 entries[fill[c]] = i
                 fill[c] += 1
-    return start, entries
+    return lo, hi, start, entries, layout
 
 
 @nb.njit(cache=True)
-def grid_pairs(lo, hi, start, entries, ox, oy, inv_x, inv_y, nx, ny):
-    """Box-overlap pairs, each reported once by the cell owning its intersection's corner."""
-    buf = np.empty((lo.shape[0] + 16, 2), dtype=np.int64)
+def grid_pairs(lo, hi, start, entries, layout, buf):
+    """Box-overlap pairs into buf, each reported once by the cell owning its intersection's
+    lower-left corner; returns (pairs found, pair tests)."""
+    ox, oy, inv_x, inv_y, nx, ny = layout
     count = 0
     tests = 0
     for c in range(nx * ny):
@@ -78,9 +103,9 @@ def grid_pairs(lo, hi, start, entries, ox, oy, inv_x, inv_y, nx, ny):
                     corner_x = max(lo[i, 0], lo[j, 0])
                     corner_y = max(lo[i, 1], lo[j, 1])
                     if cell_of(corner_x, ox, inv_x, nx) == cx and cell_of(corner_y, oy, inv_y, ny) == cy:
-                        buf = push(buf, count, i, j)
+                        emit(buf, count, i, j)
                         count += 1
-    return buf[:count], tests
+    return count, tests
 
 
 class UniformGrid(BroadPhase):
@@ -105,37 +130,24 @@ class UniformGrid(BroadPhase):
         if cell is not None and not (np.isfinite(cell) and cell > 0):
             raise ValueError(f"own.grid: cell must be a positive finite size, got {cell!r}")
 
-    def _layout(self, lo, hi):
-        """Origin, inverse cell sizes and cell counts for this frame's extents."""
-        x0, y0, x1, y1 = extents(lo, hi)
-        # All boxes at one coordinate: any cell size works.
-        span_x, span_y = (x1 - x0) or 1.0, (y1 - y0) or 1.0
-        p, cell = self.params["p"], self.params["cell"]
-        if p is not None:
-            return x0, y0, p / span_x, p / span_y, int(p), int(p)
-        c = float(cell) if cell is not None else 4.0 * self._mean_radius
-        c = max(c, max(span_x, span_y) * 1e-9)
-        # Never more than MAX_CELLS_PER_OBJECT * n cells (also covers zero radii).
-        cap = MAX_CELLS_PER_OBJECT * max(self.n, 1) + 16
-        while math.ceil(span_x / c) * math.ceil(span_y / c) > cap:
-            c *= 1.25
-        return x0, y0, 1.0 / c, 1.0 / c, max(1, math.ceil(span_x / c)), max(1, math.ceil(span_y / c))
-
     def _reset(self, positions, radii):
-        self._mean_radius = float(radii.mean()) if self.n else 0.0
+        mean_radius = float(radii.mean()) if self.n else 0.0
+        self._cell = float(self.params["cell"]) if self.params["cell"] is not None else 4.0 * mean_radius
+        self._p = int(self.params["p"] or 0)
+        self._max_cells = MAX_CELLS_PER_OBJECT * max(self.n, 1) + 16
+        self._collect = PairCollector()
         self._update(positions)
 
     def _update(self, positions):
-        self._lo, self._hi = boxes(positions, self.radii)
-        self._layout_now = self._layout(self._lo, self._hi)
-        self._start, self._entries = grid_build(self._lo, self._hi, *self._layout_now)
+        self._lo, self._hi, self._start, self._entries, self._layout_now = grid_build(
+            positions, self.radii, self._p, self._cell, self._max_cells
+        )
 
     def _pairs(self):
-        out, tests = grid_pairs(self._lo, self._hi, self._start, self._entries, *self._layout_now)
+        out, (tests,) = self._collect(grid_pairs, self._lo, self._hi, self._start, self._entries, self._layout_now)
         nx, ny = self._layout_now[4:]
         self._stats = {"cells": nx * ny, "entries": len(self._entries), "tests": tests}
         return out
-
 
     def validate(self):
         ox, oy, inv_x, inv_y, nx, ny = self._layout_now

@@ -16,7 +16,7 @@ import numpy as np
 
 from engines.base import BroadPhase
 
-from .common import boxes, extents, overlap, push
+from .common import PairCollector, boxes, emit, extents, overlap
 
 # Columns of the integer node table.
 START, STAY, END, DEPTH, CHILD = range(5)
@@ -101,9 +101,20 @@ def quadtree_build(lo, hi, x0, y0, x1, y1, capacity, max_depth):
 
 
 @nb.njit(cache=True)
-def quadtree_pairs(lo, hi, nodes, bounds, perm):
-    """Each node's own objects against the rest of their node and the children their boxes meet."""
-    buf = np.empty((lo.shape[0] + 16, 2), dtype=np.int64)
+def quadtree_from(positions, radii, capacity, max_depth):
+    """Boxes and the tree over them, rooted at a square around all boxes."""
+    lo, hi = boxes(positions, radii)
+    x0, y0, x1, y1 = extents(lo, hi)
+    # max() keeps the square holding every box whatever x0 + size rounds to.
+    size = max(x1 - x0, y1 - y0)
+    nodes, bounds, perm = quadtree_build(lo, hi, x0, y0, max(x0 + size, x1), max(y0 + size, y1), capacity, max_depth)
+    return lo, hi, nodes, bounds, perm
+
+
+@nb.njit(cache=True)
+def quadtree_pairs(lo, hi, nodes, bounds, perm, buf):
+    """Each node's own objects against the rest of their node and the children their boxes meet.
+    Returns (pairs found, pair tests, nodes visited)."""
     stack = np.empty(4 * (int(nodes[:, DEPTH].max()) + 2), dtype=np.int64)
     count = 0
     tests = 0
@@ -115,7 +126,7 @@ def quadtree_pairs(lo, hi, nodes, bounds, perm):
             for b in range(a + 1, stay):
                 tests += 1
                 if overlap(lo, hi, i, perm[b]):
-                    buf = push(buf, count, i, perm[b])
+                    emit(buf, count, i, perm[b])
                     count += 1
             if first_child == NO_CHILD:
                 continue
@@ -133,13 +144,13 @@ def quadtree_pairs(lo, hi, nodes, bounds, perm):
                 for b in range(nodes[m, START], nodes[m, STAY]):
                     tests += 1
                     if overlap(lo, hi, i, perm[b]):
-                        buf = push(buf, count, i, perm[b])
+                        emit(buf, count, i, perm[b])
                         count += 1
                 if nodes[m, CHILD] != NO_CHILD:
                     for c in range(4):
                         stack[top] = nodes[m, CHILD] + c
                         top += 1
-    return buf[:count], tests, visited
+    return count, tests, visited
 
 
 class Quadtree(BroadPhase):
@@ -159,20 +170,18 @@ class Quadtree(BroadPhase):
         self._max_depth = self._int_param("max_depth", 0)
 
     def _reset(self, positions, radii):
-        self._lo, self._hi = boxes(positions, radii)
-        x0, y0, x1, y1 = extents(self._lo, self._hi)
-        # A square root region; max() keeps it holding every box whatever x0 + size rounds to.
-        size = max(x1 - x0, y1 - y0)
-        self._nodes, self._bounds, self._perm = quadtree_build(
-            self._lo, self._hi, x0, y0, max(x0 + size, x1), max(y0 + size, y1),
-            self._capacity, self._max_depth,
+        self._collect = PairCollector()
+        self._update(positions)
+
+    def _update(self, positions):
+        self._lo, self._hi, self._nodes, self._bounds, self._perm = quadtree_from(
+            positions, self.radii, self._capacity, self._max_depth
         )
 
     def _pairs(self):
-        out, tests, visited = quadtree_pairs(self._lo, self._hi, self._nodes, self._bounds, self._perm)
+        out, (tests, visited) = self._collect(quadtree_pairs, self._lo, self._hi, self._nodes, self._bounds, self._perm)
         self._stats = {"nodes": len(self._nodes), "depth": int(self._nodes[:, DEPTH].max()), "tests": tests, "visited": visited}
         return out
-
 
     def _mid(self, k: int) -> tuple[float, float]:
         x0, y0, x1, y1 = self._bounds[k]

@@ -7,18 +7,12 @@ import numpy as np
 
 from engines.base import BroadPhase
 
-from .common import boxes, push
+from .common import PairCollector, emit
 
 AXES = ("x", "y", "auto")
-
-
-def sweep_axis(positions: np.ndarray, axis: str) -> int:
-    """0 or 1; "auto" takes the axis along which the centres vary most (as engines do)."""
-    if axis == "x":
-        return 0
-    if axis == "y":
-        return 1
-    return int(_y_varies_more(positions))
+# An insertion-sort repair that needs more swaps than this many per object gives up and sorts
+# from scratch: coherence only pays while objects move little between frames.
+MAX_SWAPS_PER_OBJECT = 8
 
 
 @nb.njit(cache=True)
@@ -35,60 +29,120 @@ def _y_varies_more(positions: np.ndarray) -> bool:
 
 
 @nb.njit(cache=True)
-def sap_sort(lo: np.ndarray, hi: np.ndarray, axis: int):
-    """Order by lower bound on the sweep axis; sorted copies keep the sweep on contiguous memory."""
-    other = 1 - axis
-    order = np.argsort(lo[:, axis], kind="mergesort")
-    return order, lo[order, axis].copy(), hi[order, axis].copy(), lo[order, other].copy(), hi[order, other].copy()
+def _insertion_sort(order: np.ndarray, keys: np.ndarray, max_swaps: int) -> int:
+    """Sort `order` by `keys` in place (both permuted together); -1 if it needed over max_swaps."""
+    swaps = 0
+    for a in range(1, order.shape[0]):
+        k, o = keys[a], order[a]
+        b = a - 1
+        while b >= 0 and keys[b] > k:
+            keys[b + 1] = keys[b]
+            order[b + 1] = order[b]
+            b -= 1
+            swaps += 1
+        if swaps > max_swaps:
+            return -1
+        keys[b + 1] = k
+        order[b + 1] = o
+    return swaps
 
 
 @nb.njit(cache=True)
-def sap_sweep(order, s_lo, s_hi, o_lo, o_hi) -> tuple[np.ndarray, int]:
-    """All box-overlap pairs; also returns how many pairs overlapped on the sweep axis alone."""
-    n = order.shape[0]
-    buf = np.empty((n + 16, 2), dtype=np.int64)
+def sap_prepare(positions, radii, axis_mode, order, incremental):
+    """The sweep's sorted arrays for this frame.
+
+    axis_mode: 0 x, 1 y, 2 largest variance. With `incremental`, `order` (last frame's) is
+    repaired by insertion sort when the axis is unchanged, else sorted from scratch.
+    Returns (axis, order, s_lo, s_hi, o_lo, o_hi, swaps); swaps is -1 after a full sort.
+    """
+    n = positions.shape[0]
+    axis = axis_mode if axis_mode < 2 else (1 if _y_varies_more(positions) else 0)
+    other = 1 - axis
+    swaps = -1
+    if incremental and order.shape[0] == n + 1 and n > 0 and order[n] == axis:
+        order = order.copy()
+        keys = np.empty(n)
+        for a in range(n):
+            keys[a] = positions[order[a], axis] - radii[order[a]]
+        swaps = _insertion_sort(order[:n], keys, MAX_SWAPS_PER_OBJECT * n + 64)
+    if swaps < 0:
+        keys = positions[:, axis] - radii
+        order = np.empty(n + 1, dtype=np.int64)
+        order[:n] = np.argsort(keys)
+    order[n] = axis  # remember the axis the order belongs to
+    s_lo, s_hi, o_lo, o_hi = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    for a in range(n):
+        i = order[a]
+        s_lo[a] = positions[i, axis] - radii[i]
+        s_hi[a] = positions[i, axis] + radii[i]
+        o_lo[a] = positions[i, other] - radii[i]
+        o_hi[a] = positions[i, other] + radii[i]
+    return axis, order, s_lo, s_hi, o_lo, o_hi, swaps
+
+
+@nb.njit(cache=True)
+def sap_sweep(order, s_lo, s_hi, o_lo, o_hi, buf):
+    """Box-overlap pairs into buf; returns (pairs found, pairs overlapping on the sweep axis)."""
+    n = s_lo.shape[0]
     count = 0
     axis_hits = 0
     for a in range(n):
-        top = s_hi[a]
+        top, lo_a, hi_a, i = s_hi[a], o_lo[a], o_hi[a], order[a]
         for b in range(a + 1, n):
             # Sorted by lower bound: once one starts past our upper bound, all later ones do.
             if s_lo[b] > top:
                 break
             axis_hits += 1
-            if o_lo[b] <= o_hi[a] and o_lo[a] <= o_hi[b]:
-                buf = push(buf, count, order[a], order[b])
+            if max(lo_a, o_lo[b]) <= min(hi_a, o_hi[b]):
+                emit(buf, count, i, order[b])
                 count += 1
-    return buf[:count], axis_hits
+    return count, axis_hits
 
 
 class SweepAndPrune(BroadPhase):
-    """Sweep and prune rebuilt every frame; `axis` is "x" (the essay), "y" or "auto".
+    """Sweep and prune; `axis` is "x" (the essay), "y" or "auto" (largest variance of the centres).
 
     Emits only pairs whose boxes overlap on both axes. Cost grows with the number of pairs that
-    overlap on the sweep axis alone, so clumping along that axis hurts; "auto" avoids the worse one.
+    overlap on the sweep axis alone, so clumping along that axis hurts; "auto" avoids the worse
+    one. With `incremental`, the sorted order is kept between frames and repaired by insertion
+    sort, which costs O(n) while objects move little (temporal coherence).
     """
 
     name = "own.sap"
-    defaults = {"axis": "auto"}
+    defaults = {"axis": "auto", "incremental": False}
 
     def __init__(self, **params):
         super().__init__(**params)
         if self.params["axis"] not in AXES:
-            raise ValueError(f"own.sap: axis must be one of {', '.join(AXES)}, got {self.params['axis']!r}")
+            raise ValueError(f"{self.name}: axis must be one of {', '.join(AXES)}, got {self.params['axis']!r}")
+        self._axis_mode = AXES.index(self.params["axis"])
+        self._incremental = bool(self.params["incremental"])
+        self._order = np.empty(0, dtype=np.int64)
+        self._collect = PairCollector()
 
     def _reset(self, positions, radii):
-        self._axis = sweep_axis(positions, self.params["axis"])
-        lo, hi = boxes(positions, radii)
-        self._sorted = sap_sort(lo, hi, self._axis)
+        self._order = np.empty(0, dtype=np.int64)
+        self._update(positions)
+
+    def _update(self, positions):
+        axis, self._order, *self._sorted, swaps = sap_prepare(
+            positions, self.radii, self._axis_mode, self._order, self._incremental
+        )
+        self._stats = {"axis": axis, "swaps": swaps}
 
     def _pairs(self):
-        out, axis_hits = sap_sweep(*self._sorted)
-        self._stats = {"axis": self._axis, "axis_overlaps": axis_hits}
+        out, (axis_hits,) = self._collect(sap_sweep, self._order[:self.n], *self._sorted)
+        self._stats["axis_overlaps"] = axis_hits
         return out
 
     def validate(self):
-        order, s_lo = self._sorted[0], self._sorted[1]
+        order, s_lo = self._order[:self.n], self._sorted[0]
         assert np.array_equal(np.sort(order), np.arange(self.n)), "sort order is not a permutation"
         assert (np.diff(s_lo) >= 0).all(), "lower bounds are not sorted"
 
+
+class IncrementalSweepAndPrune(SweepAndPrune):
+    """Sweep and prune that keeps its sorted order between frames (insertion-sort repair)."""
+
+    name = "own.sap_incremental"
+    defaults = {"axis": "auto", "incremental": True}
