@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import faulthandler
 import gc
+import json
 import multiprocessing as mp
 import signal
 import time
@@ -25,7 +26,7 @@ from scenes.motion import Trajectory
 COLUMNS = [
     "backend", "params", "scene", "dist", "n", "radius_min", "radius_max", "seed", "repeat", "frame",
     "t_update_s", "t_pairs_s", "t_narrow_s", "t_total_s", "candidates", "true_pairs", "missed",
-    "false_positives", "box_pairs", "box_missed", "reports", "t_setup_s", "status",
+    "false_positives", "box_pairs", "box_missed", "reports", "t_setup_s", "status", "stats",
 ]
 
 
@@ -89,6 +90,7 @@ def measure(job: Job, traj: Trajectory, repeat: int) -> list[dict[str, Any]]:
                     "repeat": repeat, "frame": f, "t_update_s": t1 - t0, "t_pairs_s": t2 - t1,
                     "t_narrow_s": t3 - t2, "t_total_s": t3 - t0, "t_setup_s": setup,
                     "reports": backend.reports, "params": backend.describe(), "status": "ok",
+                    "stats": json.dumps(backend.stats(), default=float),
                     **_count(f, traj, candidates, backend.reports),
                 })
                 if f == 1 and t3 - t0 > job.budget_s:

@@ -1,4 +1,4 @@
-"""Hypothesis strategies for scenes that try to break broad phases.
+"""Hypothesis strategies for scenes that try to break broad phases, and hand-made boundary cases.
 
 Besides the generators, they draw adversarial layouts: circles on a small integer lattice with
 radii that make many boxes touch exactly, duplicated positions, everything on one line, radii
@@ -62,3 +62,21 @@ def degenerate_scenes(draw, max_n: int = 150):
 
 
 any_scene = st.one_of(generated_scenes(), lattice_scenes(), degenerate_scenes())
+
+
+# The boundary rule, pinned by hand (closed intervals, as Bullet and Chipmunk define it).
+BOUNDARY = {
+    # centres 2 apart, radii 1: boxes touch exactly on x -> overlap
+    "touching boxes overlap": ([[0.0, 0.0], [2.0, 0.0]], [1.0, 1.0], [(0, 1)]),
+    "touching corners overlap": ([[0.0, 0.0], [2.0, 2.0]], [1.0, 1.0], [(0, 1)]),
+    "1e-12 apart do not": ([[0.0, 0.0], [2.0 + 1e-12, 0.0]], [1.0, 1.0], []),
+    "1e-12 apart on y do not": ([[0.0, 0.0], [0.0, 2.0 + 1e-12]], [1.0, 1.0], []),
+    "coincident circles do": ([[5.0, 5.0], [5.0, 5.0]], [1.0, 1.0], [(0, 1)]),
+    "coincident points of radius zero do": ([[5.0, 5.0], [5.0, 5.0]], [0.0, 0.0], [(0, 1)]),
+    "a point on a box edge": ([[0.0, 0.0], [1.0, 0.5]], [1.0, 0.0], [(0, 1)]),
+    "one inside another": ([[0.0, 0.0], [0.1, 0.1]], [100.0, 0.01], [(0, 1)]),
+    "no objects": (np.zeros((0, 2)), [], []),
+    "one object": ([[1.0, 1.0]], [1.0], []),
+    "a chain of touching boxes, ends apart": ([[0.0, 0.0], [2.0, 0.0], [4.0, 0.0]], [1.0, 1.0, 1.0], [(0, 1), (1, 2)]),
+    "the chain broken by 1e-9": ([[0.0, 0.0], [2.0, 0.0], [4.0 + 1e-9, 0.0]], [1.0, 1.0, 1.0], [(0, 1)]),
+}

@@ -19,6 +19,7 @@ def assert_superset(name, positions, radii, **params):
     backend = engines.create(name, **params)
     backend.reset(positions, radii)
     got = backend.pairs()
+    backend.validate()
     n = len(positions)
     assert is_canonical(got, n) is None, is_canonical(got, n)
     missed = np.setdiff1d(keys(brute_pairs(positions, radii), n), keys(got, n))

@@ -11,7 +11,7 @@ from engines.pairs import is_canonical, keys
 from own.brute import brute_pairs
 from scenes import generate
 from scenes.motion import simulate
-from strategies import any_scene
+from strategies import BOUNDARY, any_scene
 
 # (backend, params): every exact backend with the parameter settings that change its code paths.
 EXACT = [
@@ -72,24 +72,6 @@ def test_exact_across_update_frames(name, params):
         backend.update(traj.positions[f])
         got = backend.pairs()
         np.testing.assert_array_equal(np.sort(keys(got, 400)), keys(traj.box_pairs[f], 400))
-
-
-# The boundary rule, pinned by hand (closed intervals, as Bullet and Chipmunk define it).
-BOUNDARY = {
-    # centres 2 apart, radii 1: boxes touch exactly on x -> overlap
-    "touching boxes overlap": ([[0.0, 0.0], [2.0, 0.0]], [1.0, 1.0], [(0, 1)]),
-    "touching corners overlap": ([[0.0, 0.0], [2.0, 2.0]], [1.0, 1.0], [(0, 1)]),
-    "1e-12 apart do not": ([[0.0, 0.0], [2.0 + 1e-12, 0.0]], [1.0, 1.0], []),
-    "1e-12 apart on y do not": ([[0.0, 0.0], [0.0, 2.0 + 1e-12]], [1.0, 1.0], []),
-    "coincident circles do": ([[5.0, 5.0], [5.0, 5.0]], [1.0, 1.0], [(0, 1)]),
-    "coincident points of radius zero do": ([[5.0, 5.0], [5.0, 5.0]], [0.0, 0.0], [(0, 1)]),
-    "a point on a box edge": ([[0.0, 0.0], [1.0, 0.5]], [1.0, 0.0], [(0, 1)]),
-    "one inside another": ([[0.0, 0.0], [0.1, 0.1]], [100.0, 0.01], [(0, 1)]),
-    "no objects": (np.zeros((0, 2)), [], []),
-    "one object": ([[1.0, 1.0]], [1.0], []),
-    "a chain of touching boxes, ends apart": ([[0.0, 0.0], [2.0, 0.0], [4.0, 0.0]], [1.0, 1.0, 1.0], [(0, 1), (1, 2)]),
-    "the chain broken by 1e-9": ([[0.0, 0.0], [2.0, 0.0], [4.0 + 1e-9, 0.0]], [1.0, 1.0, 1.0], [(0, 1)]),
-}
 
 
 @pytest.mark.parametrize(("name", "params"), EXACT, ids=IDS)

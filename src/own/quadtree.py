@@ -25,19 +25,20 @@ STRADDLE = 4  # class of an object that fits no child
 
 
 @nb.njit(cache=True, inline="always")
+def _half(lo: float, hi: float, mid: float) -> int:
+    """0: the interval lies below mid, 1: at or above it, -1: it straddles mid."""
+    if hi < mid:
+        return 0
+    if lo >= mid:
+        return 1
+    return -1
+
+
+@nb.njit(cache=True, inline="always")
 def child_class(lo, hi, i, mid_x, mid_y):
     """0..3 for the child quadrant that holds box i entirely, STRADDLE if none does."""
-    if hi[i, 0] < mid_x:
-        qx = 0
-    elif lo[i, 0] >= mid_x:
-        qx = 1
-    else:
-        return STRADDLE
-    if hi[i, 1] < mid_y:
-        qy = 0
-    elif lo[i, 1] >= mid_y:
-        qy = 1
-    else:
+    qx, qy = _half(lo[i, 0], hi[i, 0], mid_x), _half(lo[i, 1], hi[i, 1], mid_y)
+    if qx < 0 or qy < 0:
         return STRADDLE
     return 2 * qy + qx
 
