@@ -38,7 +38,8 @@ def run_cli(prog: str, main, argv: list[str] | None) -> int:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"{prog}: interrupted; rows measured so far are on disk", file=sys.stderr)
+        print(f"{prog}: interrupted; the rows measured so far are in the output folder "
+              "(results.partial.csv, or results.csv with --resume for the essay study)", file=sys.stderr)
         return 130
 
 

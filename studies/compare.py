@@ -8,6 +8,7 @@ frame and writes results.csv (one row per backend, repeat and frame), meta.json 
 from __future__ import annotations
 
 import csv
+import os
 import sys
 import time
 
@@ -85,7 +86,8 @@ def main(argv: list[str] | None = None) -> int:
 
     fixed = scene_columns(traj)
     csv_path = out / "results.csv"
-    with open(csv_path, "w", newline="") as fh:
+    partial = out / "results.partial.csv"  # renamed to results.csv once every backend has run
+    with open(partial, "w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=COLUMNS)
         writer.writeheader()
 
@@ -100,6 +102,7 @@ def main(argv: list[str] | None = None) -> int:
                 bar.set_postfix_str(current)
                 job = Job(current, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout)
                 outcomes[current] = run_isolated(job, traj, write).status
+    os.replace(partial, csv_path)
 
     rows = pd.read_csv(csv_path)
     table = summarise(rows)

@@ -11,22 +11,25 @@ import faulthandler
 import gc
 import json
 import multiprocessing as mp
+import resource
 import signal
 import time
 import traceback
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
 import engines
-from engines.pairs import keys, narrow_phase
+from engines.pairs import is_canonical, keys, narrow_phase
 from scenes.motion import Trajectory
 
 COLUMNS = [
     "backend", "params", "scene", "dist", "n", "radius_min", "radius_max", "seed", "repeat", "frame",
     "t_update_s", "t_pairs_s", "t_narrow_s", "t_total_s", "candidates", "true_pairs", "missed",
     "false_positives", "box_pairs", "box_missed", "reports", "t_setup_s", "status", "stats",
+    "tunneled", "peak_rss_mb",
 ]
 
 
@@ -39,11 +42,20 @@ class Job:
     repeats: int = 1
     budget_s: float = float("inf")  # a first timed frame slower than this stops the backend
     timeout_s: float = 600.0
+    memory_mb: float | None = None  # address space the child may add; None: no limit
+    count_tunneling: bool = False  # pairs that met between frames but were never candidates
+
+
+class InvalidOutput(Exception):
+    """A backend returned something that is not a valid pair array."""
 
 
 def _count(frame: int, traj: Trajectory, candidates: np.ndarray, reports: str) -> dict[str, Any]:
     """Missed and extra pairs of one frame against the exact reference."""
     n = traj.scene.n
+    problem = is_canonical(candidates, n)
+    if problem:
+        raise InvalidOutput(problem)
     got = keys(candidates, n)
     truth = keys(traj.contacts[frame], n)
     boxes = keys(traj.box_pairs[frame], n)
@@ -71,9 +83,11 @@ def measure(job: Job, traj: Trajectory, repeat: int) -> list[dict[str, Any]]:
         start = time.perf_counter()
         backend.reset(traj.positions[0], radii)
         backend.update(traj.positions[0])
-        narrow_phase(traj.positions[0], radii, backend.pairs())
+        first = backend.pairs()
+        narrow_phase(traj.positions[0], radii, first)
         setup = time.perf_counter() - start
         rows = []
+        seen = []  # candidate keys of every frame, for the tunneling count
         gc.collect()
         gc.disable()  # a collection inside a timed frame would be noise, not the backend's cost
         try:
@@ -93,12 +107,23 @@ def measure(job: Job, traj: Trajectory, repeat: int) -> list[dict[str, Any]]:
                     "stats": json.dumps(backend.stats(), default=float),
                     **_count(f, traj, candidates, backend.reports),
                 })
+                if job.count_tunneling:
+                    seen.append(keys(candidates, traj.scene.n))
                 if f == 1 and t3 - t0 > job.budget_s:
                     rows[-1]["status"] = (f"skipped: a frame took {t3 - t0:.3g} s, over the budget of "
                                           f"{job.budget_s:.3g} s per frame")
                     break
         finally:
             gc.enable()
+        if job.count_tunneling and rows:
+            # Paths met during frames 0 -> F; frame 0's candidates count too (the warm-up frame).
+            candidates = np.concatenate(seen + [keys(first, traj.scene.n)])
+            tunneled = int(np.setdiff1d(traj.swept_contacts, candidates).size)
+        else:
+            tunneled = None
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        for row in rows:
+            row["tunneled"], row["peak_rss_mb"] = tunneled, peak
         return rows
     finally:
         backend.close()
@@ -111,6 +136,10 @@ _TRAJECTORY: Trajectory | None = None
 def _child(job: Job, conn) -> None:
     """Child process: send ("rows", rows) per repeat, then ("done", None) or ("failed", message)."""
     faulthandler.disable()  # a crash is recorded by its signal; an inherited traceback dump is noise
+    if job.memory_mb is not None:
+        # On top of what the fork already maps (interpreter, numba, engines).
+        mapped = int(Path("/proc/self/statm").read_text().split()[0]) * resource.getpagesize()
+        resource.setrlimit(resource.RLIMIT_AS, (mapped + int(job.memory_mb * 2**20), resource.RLIM_INFINITY))
     try:
         for r in range(job.repeats):
             rows = measure(job, _TRAJECTORY, r)
@@ -119,6 +148,10 @@ def _child(job: Job, conn) -> None:
                 conn.send(("failed", rows[-1]["status"]))
                 return
         conn.send(("done", None))
+    except InvalidOutput as exc:
+        conn.send(("failed", f"invalid output: {exc}"))
+    except MemoryError:
+        conn.send(("failed", f"out of memory (budget {job.memory_mb:g} MB)"))
     except Exception as exc:  # an engine error is a result of the study, not a crash of it
         last = traceback.extract_tb(exc.__traceback__)[-1]
         conn.send(("failed", f"error: {type(exc).__name__}: {exc} (at {last.name})".replace("\n", " ")))

@@ -10,6 +10,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -34,6 +35,7 @@ def test_quick_run_end_to_end(tmp_path):
     result = run_compare("--n", "64", "--quick", "--check", "--out", str(out), "--seed", "3")
     assert result.returncode == 0, result.stderr[-2000:]
     rows = pd.read_csv(out / "results.csv")
+    assert not (out / "results.partial.csv").exists()
     assert list(rows.columns) == COLUMNS
     ok = rows[rows.status == "ok"]
     # Every available backend ran the same 3 frames; they all agree on the truth.
@@ -130,9 +132,23 @@ class Fails(Brute):
         raise RuntimeError("engine said no")
 
 
+class Backwards(Brute):
+    name = "test.backwards"
+
+    def _pairs(self):
+        return np.array([[1, 0]])
+
+
+class Hog(Brute):
+    name = "test.hog"
+
+    def _pairs(self):
+        return np.ones(10**10)
+
+
 @pytest.fixture
 def misbehaving(monkeypatch):
-    for cls in (Crashes, Hangs, Fails):
+    for cls in (Crashes, Hangs, Fails, Backwards, Hog):
         monkeypatch.setitem(registry.BACKENDS, cls.name, f"{__name__}:{cls.__name__}")
     registry._load.cache_clear()
     yield
@@ -158,6 +174,16 @@ def test_a_hanging_backend_times_out(misbehaving, small_trajectory):
 def test_an_engine_error_is_a_result(misbehaving, small_trajectory):
     outcome = run_isolated(Job("test.fail"), small_trajectory)
     assert outcome.status.startswith("error: RuntimeError: engine said no")
+
+
+def test_invalid_pairs_are_recorded_as_invalid_output(misbehaving, small_trajectory):
+    outcome = run_isolated(Job("test.backwards"), small_trajectory)
+    assert outcome.status == "invalid output: a row with i >= j"
+
+
+def test_a_memory_hog_is_stopped_by_the_budget(misbehaving, small_trajectory):
+    outcome = run_isolated(Job("test.hog", memory_mb=200), small_trajectory)
+    assert outcome.status == "out of memory (budget 200 MB)"
 
 
 def test_rows_of_finished_repeats_survive_a_later_crash(small_trajectory, monkeypatch):
