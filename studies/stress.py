@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import csv
 import fnmatch
+import json
 import os
 import sys
 import time
@@ -38,6 +39,18 @@ from .harness import COLUMNS, Job, run_isolated, scene_columns  # noqa: E402
 OUTCOMES = ["exact", "extra candidates", "missed", "invalid output", "error", "crashed", "timed out", "skipped"]
 OUTCOME_COLOURS = ["#2ca02c", "#98df8a", "#d62728", "#9467bd", "#ff7f0e", "#000000", "#7f7f7f", "#dddddd"]
 DOCS = Path(__file__).resolve().parents[1] / "docs"
+# Causes established by the evidence tests in tests/test_engines.py (see docs/engines.md).
+CAUSES = {
+    "bullet": "Bullet stops simulating a non-static object whose AABB extent has a squared length of 1e12 or more "
+              "(btCollisionWorld::updateSingleAabb), i.e. spheres of radius ~5.8e5 and up; it cannot create spheres "
+              "of radius 0; its contact breaking threshold is an absolute 0.02 units.",
+    "coal.sap": "coal's SaP misses overlaps depending on the order objects were registered in, and segfaults on "
+                "spheres of radius 0.",
+    "coal.interval": "coal's interval tree misses spheres that touch exactly along x, and zero-radius spheres.",
+    "coal.hash": "coal's spatial hash misses some exactly touching pairs, and zero-radius spheres.",
+    "coal.tree": "coal's dynamic AABB tree rejects zero-volume boxes ('The bounding volume has a negative volume').",
+    "essay": "pure Python: dense scenes exceed the time budget.",
+}
 
 
 def classify(status: str, rows: list[dict]) -> tuple[str, str]:
@@ -92,7 +105,8 @@ def heat_map(outcomes: pd.DataFrame, path: Path) -> None:
     plt.close(fig)
 
 
-def report(outcomes: pd.DataFrame, max_n: pd.DataFrame, drift: dict, meta: dict, folder: Path, figure: str) -> Path:
+def report(outcomes: pd.DataFrame, max_n: pd.DataFrame, drift: dict, meta: dict, folder: Path, figure: str,
+           tunneling_figure: str | None) -> Path:
     lines = [
         "# Stress results: which backend breaks, and how",
         "",
@@ -114,11 +128,14 @@ def report(outcomes: pd.DataFrame, max_n: pd.DataFrame, drift: dict, meta: dict,
         lines.append("Nothing: every backend was exact or a superset on every scene.")
     for backend, d in bad.groupby("backend", sort=False):
         items = "; ".join(f"{r.scene}: {r.outcome}" + (f" ({r.detail})" if r.detail else "") for r in d.itertuples())
-        lines.append(f"- **{backend}**: {items}.")
+        cause = CAUSES.get(backend) or CAUSES.get(backend.split(".")[0])
+        lines.append(f"- **{backend}**: {items}." + (f" Why: {cause}" if cause else " Cause not established."))
     lines += ["", "## Moving scenes: tunneling and the motion itself", "",
               "Tunneled: pairs whose straight paths met between two frames but that the backend never reported as "
               "a candidate, so no narrow phase could catch them. Energy drift is relative; the walls reflect, so "
               "momentum changes by design and its figure (relative to the total |m v|) is shown for reference.", ""]
+    if tunneling_figure:
+        lines += [f"![tunneling]({tunneling_figure})", ""]
     fast = outcomes[outcomes.tunneled.notna() & outcomes.scene.map(lambda sc: drift.get(sc, {}).get("swept_contacts", 0) > 0)]
     for scene, d in fast.groupby("scene", sort=False):
         dr = drift[scene]
@@ -152,6 +169,7 @@ def parse(argv):
     p.add_argument("--max-n", type=int, help="cap of the largest-n search (default 2^18, 4096 with --quick)")
     p.add_argument("--save-scenes", metavar="DIR", help="also write every stress scene as a scene file")
     p.add_argument("--quick", action="store_true", help="a smoke run: fewer frames, a lower cap on n")
+    p.add_argument("--report-only", action="store_true", help="only redo the heat map and report from OUT")
     p.add_argument("--out", metavar="DIR", help="results folder (default results/stress-<date>-<time>)")
     p.add_argument("--report-dir", metavar="DIR", help="where STRESS.md goes (default docs/, or OUT with --quick)")
     args = p.parse_args(argv)
@@ -164,8 +182,51 @@ def parse(argv):
     return args
 
 
+def tunneling_figure(table: pd.DataFrame, path: Path, scene: str = "fast_movers") -> bool:
+    """Error against run time on the fast movers: tunneled pairs per backend against time per frame."""
+    d = table[(table.scene == scene) & table.tunneled.notna() & np.isfinite(table.ms)]
+    if d.empty:
+        return False
+    fig, ax = plt.subplots(figsize=(7.5, 4.8))
+    for r in d.itertuples():
+        swept = "swept" in r.backend
+        ax.scatter(r.ms, r.tunneled, s=40, marker="s" if swept else "o", color="tab:green" if swept else "tab:blue")
+        ax.annotate(r.backend, (r.ms, r.tunneled), textcoords="offset points", xytext=(4, 4), fontsize=7)
+    ax.set_xscale("log")
+    ax.set_xlabel("median time per frame (ms)")
+    ax.set_ylabel("tunneled pairs (met between frames, never a candidate)")
+    ax.set_title(f"Swept boxes against tunneling: {scene}", fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return True
+
+
+def write_outputs(table: pd.DataFrame, max_n: pd.DataFrame, meta: dict, report_dir: Path) -> Path:
+    report_dir.mkdir(parents=True, exist_ok=True)
+    heat_map(table, report_dir / "stress.png")
+    tunneling = tunneling_figure(table, report_dir / "stress_tunneling.png")
+    return report(table, max_n, meta.get("drift", {}), meta, report_dir, "stress.png",
+                  "stress_tunneling.png" if tunneling else None)
+
+
+def report_only(args) -> int:
+    if not args.out or not (Path(args.out) / "meta.json").exists():
+        raise CliError(f"no finished stress study in {args.out} (give --out of a finished run)")
+    out = Path(args.out)
+    table = pd.read_csv(out / "outcomes.csv", keep_default_na=False, na_values=[""])
+    table["detail"] = table.detail.fillna("")
+    meta = json.loads((out / "meta.json").read_text())
+    path = write_outputs(table, pd.read_csv(out / "max_n.csv"), meta, Path(args.report_dir) if args.report_dir else DOCS)
+    print(f"wrote {path}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
+    if args.report_only:
+        return report_only(args)
     try:
         backends = engines.match(args.backends)
     except ValueError as exc:
@@ -230,14 +291,12 @@ def main(argv: list[str] | None = None) -> int:
     max_n = pd.DataFrame(max_n)
     max_n.to_csv(out / "max_n.csv", index=False)
 
-    report_dir.mkdir(parents=True, exist_ok=True)
-    heat_map(table, report_dir / "stress.png")
     command = "python -m studies.stress " + " ".join(sys.argv[1:] if argv is None else argv)
     meta = run_metadata(command, {"frames": args.frames, "timeout_s": args.timeout, "memory_mb": args.memory,
                                   "budget_s": args.budget, "minutes": round((time.perf_counter() - start) / 60, 1),
                                   "unavailable": missing, "drift": drift})
     write_json(out / "meta.json", meta)
-    path = report(table, max_n, drift, meta, report_dir, "stress.png")
+    path = write_outputs(table, max_n, meta, report_dir)
     broken = table[~table.outcome.isin(["exact", "extra candidates"])]
     print(f"\n{len(broken)} of {len(table)} backend-scene runs broke; wrote {out}/results.csv, outcomes.csv, "
           f"max_n.csv, {report_dir / 'stress.png'} and {path}")

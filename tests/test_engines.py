@@ -217,6 +217,20 @@ def test_coal_tree_rejects_zero_volume_boxes():
 
 @pytest.mark.engine_limitation
 @pytest.mark.parametrize("name", ["bullet.dbvt", "bullet.simple"])
+def test_bullet_drops_objects_whose_box_is_too_large(name):
+    # btCollisionWorld::updateSingleAabb stops simulating a non-static object whose AABB extent has
+    # a squared length of 1e12 or more: spheres of radius ~5.8e5 and up never collide.
+    found = []
+    for r in (1e5, 1e6):
+        backend = make(name)
+        backend.reset([[0.0, 0.0], [1.5 * r, 0.0]], [r, r])
+        found.append(backend.pairs().tolist())
+        backend.close()
+    assert found == [[[0, 1]], []]
+
+
+@pytest.mark.engine_limitation
+@pytest.mark.parametrize("name", ["bullet.dbvt", "bullet.simple"])
 def test_bullet_cannot_make_zero_radius_spheres(name):
     backend = make(name)
     with pytest.raises(ValueError, match="radius 0"):

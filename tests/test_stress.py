@@ -91,6 +91,10 @@ def test_stress_study_end_to_end(tmp_path):
     assert (out / "stress.png").stat().st_size > 5_000
     report = (out / "STRESS.md").read_text()
     assert "## What broke" in report and "| own.grid | 2048 |" in report
+    assert (out / "stress_tunneling.png").stat().st_size > 5_000
+    again = run_stress("--report-only", "--out", str(out), "--report-dir", str(tmp_path / "again"))
+    assert again.returncode == 0, again.stderr[-2000:]
+    assert (tmp_path / "again" / "STRESS.md").read_text() == report
 
 
 @pytest.mark.parametrize(
