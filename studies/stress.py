@@ -43,7 +43,8 @@ DOCS = Path(__file__).resolve().parents[1] / "docs"
 CAUSES = {
     "bullet": "Bullet stops simulating a non-static object whose AABB extent has a squared length of 1e12 or more "
               "(btCollisionWorld::updateSingleAabb), i.e. spheres of radius ~5.8e5 and up; it cannot create spheres "
-              "of radius 0; its contact breaking threshold is an absolute 0.02 units.",
+              "of radius 0. Its margins are absolute, larger than a scene scaled by 1e-6: see its time and memory "
+              "there in the table below.",
     "coal.sap": "coal's SaP misses overlaps depending on the order objects were registered in, and segfaults on "
                 "spheres of radius 0.",
     "coal.interval": "coal's interval tree misses spheres that touch exactly along x, and zero-radius spheres.",
