@@ -80,3 +80,21 @@ BOUNDARY = {
     "a chain of touching boxes, ends apart": ([[0.0, 0.0], [2.0, 0.0], [4.0, 0.0]], [1.0, 1.0, 1.0], [(0, 1), (1, 2)]),
     "the chain broken by 1e-9": ([[0.0, 0.0], [2.0, 0.0], [4.0 + 1e-9, 0.0]], [1.0, 1.0, 1.0], [(0, 1)]),
 }
+
+
+# Scene files that must be refused, with the words the error has to contain.
+BAD_SCENE_FILES = [
+    ("", "empty file"),
+    ("x,y\n1,2\n", "line 1: header must be x,y,r.*missing r"),
+    ("x,y,r,z\n1,2,3,4\n", "line 1: .*unknown z"),
+    ("x,y,r,vx\n1,2,3,4\n", "line 1: give both vx and vy"),
+    ("x,y,r\n1,2,3\n1,2\n", "line 3: expected 3 columns"),
+    ("x,y,r\n1,2,3\n1,2,3,4\n", "line 3: expected 3 columns"),
+    ("x,y,r\n1,abc,3\n", "line 2: column y is not a number: 'abc'"),
+    ("x,y,r\n1,2,3\nnan,2,3\n", "line 3: column x is not finite"),
+    ("x,y,r\n1,2,3\n1,2,inf\n", "line 3: column r is not finite"),
+    ("x,y,r\n1,2,-3\n", "line 2: radius is negative"),
+    ("x,y,r\n", "no circles"),
+    ("# box: 0,0,oops,1\nx,y,r\n1,1,1\n", "line 1: bad box line"),
+    ("# box: 0,0,1,1\nx,y,r\n1,1,1\n2,2,x\n", "line 4: column r is not a number"),
+]

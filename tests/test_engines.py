@@ -81,18 +81,23 @@ def within_limits(name, positions, radii):
     return not any(applies(positions, radii) for applies in LIMITATIONS.get(name, []))
 
 
+def check_scene(name, positions, radii):
+    """One fresh backend on one scene: valid pairs, none missed."""
+    backend = make(name)
+    try:
+        backend.reset(positions, radii)
+        return check_frame(backend, np.asarray(positions, dtype=float).reshape(-1, 2), np.asarray(radii, dtype=float))
+    finally:
+        backend.close()
+
+
 @pytest.mark.parametrize("name", RELIABLE)
 @settings(max_examples=30)
 @given(scene=any_scene)
 def test_engine_never_misses_on_random_and_adversarial_scenes(name, scene):
     positions, radii = scene
     assume(within_limits(name, positions, radii))
-    backend = make(name)
-    try:
-        backend.reset(positions, radii)
-        check_frame(backend, positions, radii)
-    finally:
-        backend.close()
+    check_scene(name, positions, radii)
 
 
 @pytest.mark.parametrize("name", RELIABLE)
@@ -116,12 +121,7 @@ def test_engine_on_the_hand_made_boundary_cases(name, case):
     positions, radii = np.asarray(positions, dtype=float).reshape(-1, 2), np.asarray(radii, dtype=float)
     if not within_limits(name, positions, radii):
         pytest.skip(f"{name}: known limitation on this case (see the evidence tests)")
-    backend = make(name)
-    try:
-        backend.reset(positions, radii)
-        check_frame(backend, positions, radii)
-    finally:
-        backend.close()
+    check_scene(name, positions, radii)
 
 
 @pytest.mark.parametrize("name", [n for n in RELIABLE if exact_touching not in LIMITATIONS.get(n, [])])

@@ -8,6 +8,7 @@ import pytest
 from scenes import DISTRIBUTIONS, ESSAY_BOX, Scene, generate
 from scenes.io import SceneFileError, load_scene, save_scene
 from scenes.motion import kinetic_energy, momentum, simulate
+from strategies import BAD_SCENE_FILES
 
 
 @pytest.mark.parametrize("dist", DISTRIBUTIONS)
@@ -130,24 +131,7 @@ def test_a_minimal_user_file_gets_zero_velocities_and_a_bounding_box(tmp_path):
     assert scene.box == (-1.0, -1.0, 12.0, 7.0)
 
 
-@pytest.mark.parametrize(
-    ("text", "message"),
-    [
-        ("", "empty file"),
-        ("x,y\n1,2\n", "line 1: header must be x,y,r.*missing r"),
-        ("x,y,r,z\n1,2,3,4\n", "line 1: .*unknown z"),
-        ("x,y,r,vx\n1,2,3,4\n", "line 1: give both vx and vy"),
-        ("x,y,r\n1,2,3\n1,2\n", "line 3: expected 3 columns"),
-        ("x,y,r\n1,2,3\n1,2,3,4\n", "line 3: expected 3 columns"),
-        ("x,y,r\n1,abc,3\n", "line 2: column y is not a number: 'abc'"),
-        ("x,y,r\n1,2,3\nnan,2,3\n", "line 3: column x is not finite"),
-        ("x,y,r\n1,2,3\n1,2,inf\n", "line 3: column r is not finite"),
-        ("x,y,r\n1,2,-3\n", "line 2: radius is negative"),
-        ("x,y,r\n", "no circles"),
-        ("# box: 0,0,oops,1\nx,y,r\n1,1,1\n", "line 1: bad box line"),
-        ("# box: 0,0,1,1\nx,y,r\n1,1,1\n2,2,x\n", "line 4: column r is not a number"),
-    ],
-)
+@pytest.mark.parametrize(("text", "message"), BAD_SCENE_FILES)
 def test_bad_scene_files_name_the_line_and_the_problem(tmp_path, text, message):
     path = tmp_path / "bad.csv"
     path.write_text(text)
