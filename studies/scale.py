@@ -1,0 +1,177 @@
+"""`python -m studies.scale`: how each backend's cost per frame grows with n, from 2^6 to 2^20.
+
+Scenes keep the essay's density (r = 10, the box side scaled by sqrt(n / 2048)), uniform and
+clustered. Each backend is measured in a child process at doubling n until one frame exceeds the
+budget. Writes results.csv (compare's columns plus the distribution), scale.png (log-log, with
+the fitted growth exponent of each backend in the legend) and prints the exponents, peak memory
+and the numba compile time with a cold and a warm cache.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+from tqdm import tqdm  # noqa: E402
+
+import engines  # noqa: E402
+from scenes import generate  # noqa: E402
+from scenes.motion import simulate  # noqa: E402
+
+from .cli import CliError, Parser, prepare_out, run_cli, run_metadata, write_json  # noqa: E402
+from .harness import COLUMNS, Job, run_isolated, scene_columns  # noqa: E402
+
+DISTS = ("uniform", "clusters")
+# Compiles (or loads from the cache) every kernel of our backends, and says how long that took.
+COMPILE_PROBE = """
+import time
+start = time.perf_counter()
+import engines
+from scenes import generate
+scene = generate("uniform", 256, seed=0)
+for name in ("own.sap", "own.sap_incremental", "own.grid", "own.quadtree"):
+    b = engines.create(name)
+    b.reset(scene.positions, scene.radii)
+    b.update(scene.positions)
+    b.pairs()
+print(time.perf_counter() - start)
+"""
+
+
+def scaled_scene(dist: str, n: int):
+    """The essay's density at any n: 2048 circles of radius 10 per 2000 x 2000."""
+    side = 2000.0 * np.sqrt(max(n, 1) / 2048)
+    return generate(dist, n, seed=0, box=(0.0, 0.0, side, side))
+
+
+def compile_times() -> dict[str, float]:
+    """Seconds to import and JIT-compile our kernels into an empty cache, then again from it."""
+    with tempfile.TemporaryDirectory() as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+        times = {}
+        for kind in ("cold", "warm"):
+            done = subprocess.run([sys.executable, "-c", COMPILE_PROBE], env=env, capture_output=True, text=True,
+                                  timeout=600)
+            times[f"{kind}_s"] = float(done.stdout.strip().splitlines()[-1]) if done.returncode == 0 else float("nan")
+    return times
+
+
+def growth_exponent(d: pd.DataFrame) -> float:
+    """Slope of log(time) against log(n) over the larger half of the sizes measured."""
+    d = d[d.n >= d.n.median()]
+    if len(d) < 2:
+        return float("nan")
+    return float(np.polyfit(np.log(d.n), np.log(d.ms), 1)[0])
+
+
+def figure(medians: pd.DataFrame, path: Path) -> dict[tuple[str, str], float]:
+    exponents = {}
+    fig, axes = plt.subplots(1, len(DISTS), figsize=(7 * len(DISTS), 5.5), sharey=True)
+    for ax, dist in zip(np.atleast_1d(axes), DISTS):
+        for backend, d in medians[medians.dist == dist].groupby("backend", sort=False):
+            k = exponents[(dist, backend)] = growth_exponent(d)
+            ax.plot(d.n, d.ms, "-o", ms=3, lw=1.2, label=f"{backend} (n^{k:.2f})")
+        ax.set_xscale("log", base=2)
+        ax.set_yscale("log")
+        ax.set_xlabel("n (essay density, r = 10)")
+        ax.set_ylabel("median time per frame: update + pairs + narrow (ms)")
+        ax.set_title(dist, fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return exponents
+
+
+def parse(argv):
+    p = Parser(prog="python -m studies.scale", description=__doc__.split("\n\n")[0])
+    p.add_argument("--backends", default="*", metavar="PATTERN[,PATTERN]", help="backends (globs; default all)")
+    p.add_argument("--max-log2-n", type=int, default=20, help="largest n as a power of two (default 20)")
+    p.add_argument("--frames", type=int, default=3, help="timed frames per size (default 3)")
+    p.add_argument("--budget", type=float, default=1.0, metavar="S",
+                   help="stop a backend once a frame takes longer than S seconds (default 1)")
+    p.add_argument("--timeout", type=float, default=300.0, metavar="S", help="per backend and size (default 300)")
+    p.add_argument("--quick", action="store_true", help="a smoke run: n up to 2^11, one frame")
+    p.add_argument("--out", metavar="DIR", help="results folder (default results/scale-<date>-<time>)")
+    args = p.parse_args(argv)
+    if args.quick:
+        args.max_log2_n, args.frames = min(args.max_log2_n, 11), 1
+    if not 6 <= args.max_log2_n <= 24 or args.frames < 1 or args.budget <= 0:
+        raise CliError("--max-log2-n must be 6..24, --frames and --budget positive")
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse(argv)
+    try:
+        chosen = engines.match(args.backends)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    out = prepare_out(args.out, "scale")
+    missing = {n: r for n, r in engines.unavailable().items() if n in chosen}
+    for name, reason in missing.items():
+        print(f"WARNING: {name} is NOT AVAILABLE and was not run: {reason}", file=sys.stderr)
+    start = time.perf_counter()
+    sizes = [2**k for k in range(6, args.max_log2_n + 1)]
+    partial = out / "results.partial.csv"
+    stopped: dict[tuple[str, str], str] = {}
+    with open(partial, "w", newline="") as fh, tqdm(total=len(DISTS) * len(sizes), desc="scale", unit="size",
+                                                     file=sys.stderr) as bar:
+        writer = csv.DictWriter(fh, fieldnames=COLUMNS)
+        writer.writeheader()
+        for dist in DISTS:
+            active = [b for b in chosen if b not in missing]
+            for n in sizes:
+                if not active:
+                    break
+                traj = simulate(scaled_scene(dist, n), args.frames + 1)
+                fixed = scene_columns(traj)
+                for backend in list(active):
+                    bar.set_postfix_str(f"{dist} n={n} {backend}")
+                    job = Job(backend, budget_s=args.budget, timeout_s=args.timeout)
+                    result = run_isolated(job, traj, lambda rows: [writer.writerow(
+                        {"backend": backend, **fixed, **r}) for r in rows])
+                    fh.flush()
+                    if result.status != "ok":
+                        active.remove(backend)
+                        stopped[(dist, backend)] = f"n = {n}: {result.status}"
+                bar.update(1)
+    os.replace(partial, out / "results.csv")
+
+    rows = pd.read_csv(out / "results.csv")
+    ok = rows[rows.status == "ok"]
+    medians = (ok.assign(ms=ok.t_total_s * 1e3).groupby(["dist", "backend", "n"], sort=False)
+               .agg(ms=("ms", "median"), peak_mb=("peak_rss_mb", "max")).reset_index())
+    exponents = figure(medians, out / "scale.png")
+    compile_s = compile_times()
+    print(f"\n{'backend':<20} {'dist':<9} {'largest n':>10} {'ms at largest n':>16} {'growth':>7} {'peak MB':>8}")
+    for (dist, backend), d in medians.groupby(["dist", "backend"], sort=False):
+        last = d.iloc[-1]
+        print(f"{backend:<20} {dist:<9} {int(last.n):>10} {last.ms:>16.3f} {exponents[(dist, backend)]:>7.2f} "
+              f"{last.peak_mb:>8.0f}" + (f"   stopped at {stopped[(dist, backend)]}" if (dist, backend) in stopped else ""))
+    print(f"\nnumba compile of our kernels: {compile_s['cold_s']:.1f} s with an empty cache, "
+          f"{compile_s['warm_s']:.2f} s from the cache (process start and imports included)")
+    command = "python -m studies.scale " + " ".join(sys.argv[1:] if argv is None else argv)
+    write_json(out / "meta.json", run_metadata(command, {
+        "compile": compile_s, "stopped": {f"{d} {b}": s for (d, b), s in stopped.items()},
+        "exponents": {f"{d} {b}": e for (d, b), e in exponents.items()}, "unavailable": missing,
+        "minutes": round((time.perf_counter() - start) / 60, 1),
+    }))
+    print(f"wrote {out / 'results.csv'}, {out / 'scale.png'}, {out / 'meta.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(run_cli("scale", main, None))

@@ -1,0 +1,40 @@
+"""The scale study and the benchmark command, end to end on small sizes."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+from studies.scale import growth_exponent
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_growth_exponent_of_a_power_law():
+    n = pd.Series([2**k for k in range(6, 16)])
+    assert abs(growth_exponent(pd.DataFrame({"n": n, "ms": 3e-4 * n**1.5})) - 1.5) < 1e-9
+
+
+def test_scale_study_quick(tmp_path):
+    out = tmp_path / "scale"
+    done = subprocess.run([sys.executable, "-m", "studies.scale", "--quick", "--backends", "own.grid,own.brute",
+                           "--budget", "0.002", "--out", str(out)], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    rows = pd.read_csv(out / "results.csv")
+    assert set(rows.dist) == {"uniform", "clusters"} and rows.n.max() == 2048
+    # The tight budget stops brute force before the grid: each backend stops on its own.
+    assert rows[rows.backend == "own.brute"].n.max() < rows[rows.backend == "own.grid"].n.max()
+    assert "stopped at n = " in done.stdout and "numba compile" in done.stdout
+    assert (out / "scale.png").stat().st_size > 10_000
+
+
+def test_bench_quick_prints_the_targets():
+    done = subprocess.run([sys.executable, "-m", "studies.bench", "--quick", "--frames", "2"], cwd=ROOT,
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    lines = [line.split() for line in done.stdout.splitlines()[1:]]
+    assert [line[1] for line in lines] == ["own.grid", "own.sap", "own.quadtree"]
+    assert all(float(line[3]) > 0 and line[5].endswith("x") for line in lines)
