@@ -10,6 +10,7 @@ come back as false positives, not errors.
 
 from __future__ import annotations
 
+import ctypes
 import os
 import sys
 
@@ -17,15 +18,23 @@ import numpy as np
 
 
 def _import_quietly():
-    """pybullet prints its build time to the C-level stdout on import; keep tables clean."""
+    """pybullet prints its build time from C on import; keep tables and logs clean.
+
+    An import failure is still raised as a Python exception: only C-level output is dropped.
+    """
     sys.stdout.flush()
-    saved, devnull = os.dup(1), os.open(os.devnull, os.O_WRONLY)
-    os.dup2(devnull, 1)
+    sys.stderr.flush()
+    saved = {fd: os.dup(fd) for fd in (1, 2)}
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    for fd in saved:
+        os.dup2(devnull, fd)
     try:
         import pybullet
     finally:
-        os.dup2(saved, 1)
-        os.close(saved)
+        ctypes.CDLL(None).fflush(None)  # C buffers its output when it is not a terminal
+        for fd, copy in saved.items():
+            os.dup2(copy, fd)
+            os.close(copy)
         os.close(devnull)
     return pybullet
 

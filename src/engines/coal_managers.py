@@ -21,9 +21,10 @@ MAX_CONTACTS = 1 << 30
 class _Coal(BroadPhase):
     exact = False
     reports = "contacts"
+    manager = ""  # the coal class name
 
     def _manager(self, positions, radii):
-        raise NotImplementedError
+        return getattr(coal, self.manager)()
 
     def _reset(self, positions, radii):
         self._geoms = [coal.Sphere(float(r)) for r in radii.tolist()]
@@ -46,6 +47,9 @@ class _Coal(BroadPhase):
             obj.computeAABB()
         self._mgr.update()
 
+    def _indices(self, ids: np.ndarray) -> np.ndarray:
+        return self._id_order[np.searchsorted(self._sorted_ids, ids)]
+
     def _pairs(self):
         callback = coal.CollisionCallBackDefault()
         callback.data.request.num_max_contacts = MAX_CONTACTS
@@ -55,25 +59,46 @@ class _Coal(BroadPhase):
             return canonical([], [])
         a = np.fromiter((c.o1.id() for c in contacts), dtype=np.uint64, count=len(contacts))
         b = np.fromiter((c.o2.id() for c in contacts), dtype=np.uint64, count=len(contacts))
-        index = lambda ids: self._id_order[np.searchsorted(self._sorted_ids, ids)]  # noqa: E731
-        return canonical(index(a), index(b))
+        return canonical(self._indices(a), self._indices(b))
 
 
-def _simple(name: str, manager: str, doc: str) -> type[_Coal]:
-    cls = type(name, (_Coal,), {"name": f"coal.{name}", "__doc__": doc,
-                                "_manager": lambda self, p, r: getattr(coal, manager)()})
-    return cls
+class CoalNaive(_Coal):
+    """All pairs tested (coal's reference manager)."""
+
+    name, manager = "coal.naive", "NaiveCollisionManager"
 
 
-naive = _simple("naive", "NaiveCollisionManager", "All pairs tested (coal's reference manager).")
-sap = _simple("sap", "SaPCollisionManager", "Sweep and prune on all three axes with incremental updates.")
-ssap = _simple("ssap", "SSaPCollisionManager", "Simple sweep and prune: sorted along the axis of largest variance.")
-interval = _simple("interval", "IntervalTreeCollisionManager", "Interval trees over the three axes.")
-tree = _simple("tree", "DynamicAABBTreeCollisionManager", "Dynamic AABB tree (FCL's default manager).")
-tree_array = _simple("tree_array", "DynamicAABBTreeArrayCollisionManager", "Dynamic AABB tree stored in an array.")
+class CoalSap(_Coal):
+    """Sweep and prune on all three axes with incremental updates."""
+
+    name, manager = "coal.sap", "SaPCollisionManager"
 
 
-class hash(_Coal):  # noqa: A001 - registry names are family.variant
+class CoalSimpleSap(_Coal):
+    """Simple sweep and prune: sorted along the axis of largest variance."""
+
+    name, manager = "coal.ssap", "SSaPCollisionManager"
+
+
+class CoalIntervalTree(_Coal):
+    """Interval trees over the three axes."""
+
+    name, manager = "coal.interval", "IntervalTreeCollisionManager"
+
+
+class CoalTree(_Coal):
+    """Dynamic AABB tree (FCL's default manager)."""
+
+    name, manager = "coal.tree", "DynamicAABBTreeCollisionManager"
+
+
+class CoalTreeArray(_Coal):
+    """Dynamic AABB tree stored in an array."""
+
+    name, manager = "coal.tree_array", "DynamicAABBTreeArrayCollisionManager"
+
+
+class CoalHash(_Coal):
     """Spatial hashing over the scene's extent; `cell` defaults to two mean diameters."""
 
     name = "coal.hash"
