@@ -139,6 +139,13 @@ class Backwards(Brute):
         return np.array([[1, 0]])
 
 
+class NotANumber(Brute):
+    name = "test.nan"
+
+    def _pairs(self):
+        return np.array([[0.0, np.nan]])
+
+
 class Hog(Brute):
     name = "test.hog"
 
@@ -148,7 +155,7 @@ class Hog(Brute):
 
 @pytest.fixture
 def misbehaving(monkeypatch):
-    for cls in (Crashes, Hangs, Fails, Backwards, Hog):
+    for cls in (Crashes, Hangs, Fails, Backwards, NotANumber, Hog):
         monkeypatch.setitem(registry.BACKENDS, cls.name, f"{__name__}:{cls.__name__}")
     registry._load.cache_clear()
     yield
@@ -179,6 +186,11 @@ def test_an_engine_error_is_a_result(misbehaving, small_trajectory):
 def test_invalid_pairs_are_recorded_as_invalid_output(misbehaving, small_trajectory):
     outcome = run_isolated(Job("test.backwards"), small_trajectory)
     assert outcome.status == "invalid output: a row with i >= j"
+
+
+def test_nan_output_is_recorded_as_invalid_output(misbehaving, small_trajectory):
+    outcome = run_isolated(Job("test.nan"), small_trajectory)
+    assert outcome.status == "invalid output: dtype float64 is not an integer type"
 
 
 def test_a_memory_hog_is_stopped_by_the_budget(misbehaving, small_trajectory):
