@@ -112,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
     print("times: median ±interquartile range over all timed frames and repeats; cand/true: candidates per truly "
           "overlapping pair (1 = no extra work);\nmissed: truly overlapping pairs (and, for 'boxes' backends, "
           "overlapping boxes) absent from the candidates, summed over frames;\nsetup: first build and "
-          "warm-up frame (JIT compilation, engine world creation), not in the timed frames.")
+          "warm-up frame (JIT compilation, engine world creation) of the slowest repeat, not in the timed frames.")
     problems = {n: s for n, s in outcomes.items() if s != "ok"}
     for name, status in problems.items():
         print(f"  {name}: {status}")
