@@ -15,7 +15,6 @@ import pandas as pd
 import pytest
 
 from engines import registry
-from engines.base import BroadPhase
 from own.brute import Brute
 from scenes import generate
 from scenes.motion import simulate
