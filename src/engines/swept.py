@@ -8,7 +8,7 @@ detection). The cost: more candidates, and a rebuild every frame since the radii
 
 from __future__ import annotations
 
-import numpy as np
+from own.common import swept_circles
 
 from .base import BroadPhase
 from .registry import backend_class
@@ -28,12 +28,7 @@ class _Swept(BroadPhase):
         self._backend.reset(positions, radii)
 
     def _update(self, positions):
-        # A circle around both boxes: centred between the two positions, radius r + half the
-        # largest coordinate step, padded by a few ulps so rounding cannot shrink it.
-        reach = 0.5 * np.abs(positions - self._previous).max(axis=1)
-        mid = 0.5 * (positions + self._previous)
-        pad = 4 * np.finfo(float).eps * (np.abs(mid).max(axis=1) + self.radii + reach)
-        self._backend.reset(mid, self.radii + reach + pad)
+        self._backend.reset(*swept_circles(self._previous, positions, self.radii))
         self._previous = positions.copy()
 
     def _pairs(self):

@@ -34,6 +34,16 @@ def extents(lo: np.ndarray, hi: np.ndarray) -> tuple[float, float, float, float]
     return x0, y0, x1, y1
 
 
+def swept_circles(before: np.ndarray, after: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Circles whose boxes cover each object's box at both positions (its swept box): centred
+    halfway, radius r + half the largest coordinate step, padded by a few ulps so rounding cannot
+    make a box smaller than what it must cover."""
+    reach = 0.5 * np.abs(after - before).max(axis=1)
+    mid = 0.5 * (before + after)
+    pad = 4 * np.finfo(float).eps * (np.abs(mid).max(axis=1) + radii + reach)
+    return mid, radii + reach + pad
+
+
 @nb.njit(cache=True, inline="always")
 def overlap(lo: np.ndarray, hi: np.ndarray, i: int, j: int) -> bool:
     """Closed-interval box test on both axes: touching boxes overlap.

@@ -149,17 +149,15 @@ def swept_contacts(positions: np.ndarray, radii: np.ndarray) -> np.ndarray:
     Candidates come from the exact grid on circles that cover each object's swept box; each is
     then tested exactly at its closest approach on the segment (t in [0, 1]).
     """
+    from own.common import swept_circles
     from own.grid import UniformGrid
 
     n = positions.shape[1]
     found = []
     for a, b in zip(positions[:-1], positions[1:]):
         step = b - a
-        reach = np.abs(step).max(axis=1) * 0.5
-        mid = 0.5 * (a + b)
-        pad = 4 * np.finfo(float).eps * (np.abs(mid).max(axis=1) + radii + reach)
         grid = UniformGrid()
-        grid.reset(mid, radii + reach + pad)
+        grid.reset(*swept_circles(a, b, radii))
         pairs = grid.pairs()
         if not len(pairs):
             continue
