@@ -11,11 +11,11 @@ import sys
 
 import numpy as np
 
+from scenes.generate import at_essay_density
 from scenes.motion import simulate
 
 from .cli import CliError, Parser, run_cli
 from .harness import Job, run_isolated
-from .scale import scaled_scene
 
 # ms per frame (update + pairs) that compiled code reaches on a 2-core machine of this kind.
 TARGETS_MS = {
@@ -45,7 +45,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'n':>9} {'backend':<14} {'variant':<20} {'measured ms':>12} {'target ms':>10} {'measured/target':>16}")
     for n in sizes:
         # Fewer frames at a million objects: each frame's exact reference is itself costly.
-        traj = simulate(scaled_scene("uniform", n), (args.frames if n <= 131072 else max(2, args.frames // 3)) + 1)
+        traj = simulate(at_essay_density("uniform", n), (args.frames if n <= 131072 else max(2, args.frames // 3)) + 1)
         for backend, target in TARGETS_MS[n].items():
             measured = {v: broad_phase_ms(v, traj) for v in VARIANTS[backend]}
             best = min(measured, key=measured.get)

@@ -26,7 +26,7 @@ import pandas as pd  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 import engines  # noqa: E402
-from scenes import generate  # noqa: E402
+from scenes.generate import at_essay_density  # noqa: E402
 from scenes.motion import simulate  # noqa: E402
 
 from .cli import CliError, Parser, prepare_out, run_cli, run_metadata, write_json  # noqa: E402
@@ -47,12 +47,6 @@ for name in ("own.sap", "own.sap_incremental", "own.grid", "own.quadtree"):
     b.pairs()
 print(time.perf_counter() - start)
 """
-
-
-def scaled_scene(dist: str, n: int):
-    """The essay's density at any n: 2048 circles of radius 10 per 2000 x 2000."""
-    side = 2000.0 * np.sqrt(max(n, 1) / 2048)
-    return generate(dist, n, seed=0, box=(0.0, 0.0, side, side))
 
 
 def compile_times() -> dict[str, float]:
@@ -136,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
             for n in sizes:
                 if not active:
                     break
-                traj = simulate(scaled_scene(dist, n), args.frames + 1)
+                traj = simulate(at_essay_density(dist, n), args.frames + 1)
                 fixed = scene_columns(traj)
                 for backend in list(active):
                     bar.set_postfix_str(f"{dist} n={n} {backend}")

@@ -28,7 +28,7 @@ from matplotlib.colors import ListedColormap  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 import engines  # noqa: E402
-from scenes import generate  # noqa: E402
+from scenes.generate import at_essay_density  # noqa: E402
 from scenes.io import load_scene, save_scene  # noqa: E402
 from scenes.motion import simulate  # noqa: E402
 from scenes.stress import STRESS_SCENES  # noqa: E402
@@ -80,8 +80,7 @@ def largest_n(backend: str, budget_s: float, cap: int, timeout_s: float, memory_
     """Double n (uniform scenes at the essay's density) while one frame stays within budget."""
     best, n, why = 0, 1024, f"reached the cap n = {cap}"
     while n <= cap:
-        side = 2000.0 * np.sqrt(n / 2048)
-        traj = simulate(generate("uniform", n, seed=0, box=(0.0, 0.0, side, side)), 2)
+        traj = simulate(at_essay_density("uniform", n), 2)
         out = run_isolated(Job(backend, budget_s=budget_s, timeout_s=timeout_s, memory_mb=memory_mb), traj)
         if out.status != "ok":
             why = out.status if not out.status.startswith("skipped") else f"a frame at n = {n} took over {budget_s:g} s"

@@ -97,3 +97,9 @@ def generate(
         moves=moves, walls=walls, responds=responds,
         meta={"dist": dist, "seed": seed, "speed": speed},
     )
+
+
+def at_essay_density(dist: str, n: int, seed: int = 0) -> Scene:
+    """The essay's density at any n: 2048 circles of radius 10 per 2000 x 2000, the box scaled."""
+    side = ESSAY_BOX[2] * float(np.sqrt(max(n, 1) / 2048))
+    return generate(dist, n, seed=seed, box=(0.0, 0.0, side, side))
