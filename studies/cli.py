@@ -13,6 +13,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+import engines
 from scenes import DISTRIBUTIONS, Scene, generate
 from scenes.io import load_scene
 
@@ -41,6 +42,19 @@ def run_cli(prog: str, main, argv: list[str] | None) -> int:
         print(f"{prog}: interrupted; the rows measured so far are in the output folder "
               "(results.partial.csv, or results.csv with --resume for the essay study)", file=sys.stderr)
         return 130
+
+
+def warn_unavailable(chosen: list[str]) -> dict[str, str]:
+    """Say loudly which chosen backends cannot run here (they are left out); name -> reason."""
+    missing = {n: r for n, r in engines.unavailable().items() if n in chosen}
+    for name, reason in missing.items():
+        print(f"WARNING: {name} is NOT AVAILABLE and was not run: {reason}", file=sys.stderr)
+    return missing
+
+
+def command_line(study: str, argv: list[str] | None) -> str:
+    """The command as the user typed it, for meta.json."""
+    return f"python -m studies.{study} " + " ".join(sys.argv[1:] if argv is None else argv)
 
 
 def add_scene_options(parser: argparse.ArgumentParser, n: int = 2048) -> None:

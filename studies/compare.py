@@ -18,7 +18,8 @@ from tqdm import tqdm
 import engines
 from scenes.motion import simulate
 
-from .cli import CliError, Parser, add_scene_options, prepare_out, run_cli, run_metadata, scene_from_args, write_json
+from .cli import (CliError, Parser, add_scene_options, command_line, prepare_out, run_cli, run_metadata,
+                  scene_from_args, warn_unavailable, write_json)
 from .harness import COLUMNS, Job, run_isolated, scene_columns
 from .summary import add_speedup, format_table, plot_error_vs_time, summarise
 
@@ -59,13 +60,6 @@ def list_backends() -> int:
     return 0
 
 
-def warn_unavailable(chosen: list[str]) -> list[str]:
-    missing = {n: r for n, r in engines.unavailable().items() if n in chosen}
-    for name, reason in missing.items():
-        print(f"WARNING: {name} is NOT AVAILABLE and was not run: {reason}", file=sys.stderr)
-    return [n for n in chosen if n not in missing]
-
-
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     if args.list:
@@ -76,7 +70,8 @@ def main(argv: list[str] | None = None) -> int:
         raise CliError(str(exc)) from None
     scene = scene_from_args(args)
     out = prepare_out(args.out, "compare")
-    runnable = warn_unavailable(chosen)
+    unavailable = warn_unavailable(chosen)
+    runnable = [n for n in chosen if n not in unavailable]
 
     start = time.perf_counter()
     traj = simulate(scene, args.frames + 1)  # frame 0 is every backend's warm-up
@@ -116,15 +111,13 @@ def main(argv: list[str] | None = None) -> int:
     problems = {n: s for n, s in outcomes.items() if s != "ok"}
     for name, status in problems.items():
         print(f"  {name}: {status}")
-    unavailable = {n: r for n, r in engines.unavailable().items() if n in chosen}
     if unavailable:
         print(f"NOT RUN (unavailable here): {', '.join(unavailable)}")
 
     title = f"{scene.name}: n={scene.n}, {args.frames} frames x {args.repeat} repeats"
     if not table.empty:
         plot_error_vs_time(table, out / "compare.png", title)
-    command = "python -m studies.compare " + " ".join(sys.argv[1:] if argv is None else argv)
-    write_json(out / "meta.json", run_metadata(command, {
+    write_json(out / "meta.json", run_metadata(command_line("compare", argv), {
         "scene": {**fixed, "box": scene.box, "speed": scene.meta.get("speed"), "frames": args.frames,
                   "repeats": args.repeat},
         "outcomes": outcomes, "unavailable": unavailable,

@@ -21,7 +21,7 @@ import engines
 from scenes import generate
 from scenes.motion import simulate
 
-from .cli import CliError, Parser, prepare_out, run_cli, run_metadata, write_json
+from .cli import CliError, Parser, command_line, prepare_out, run_cli, run_metadata, warn_unavailable, write_json
 from .essay_plan import Plan, Run, fixed_runs, grid_search_run
 from .harness import COLUMNS, Job, run_isolated, scene_columns
 
@@ -150,9 +150,7 @@ def main(argv: list[str] | None = None) -> int:
         if not (out / "results.csv").exists() or not meta_path.exists():
             raise CliError(f"no finished study in {out} (run python -m studies.essay first)")
     else:
-        missing = engines.unavailable()
-        for name in sorted(set(plan.engines) & set(missing)):
-            print(f"WARNING: {name} is NOT AVAILABLE and is left out of the study: {missing[name]}", file=sys.stderr)
+        missing = warn_unavailable(plan.engines)
         start = time.perf_counter()
         runner = Runner(out, plan, args.resume, args.budget)
         try:
@@ -162,12 +160,11 @@ def main(argv: list[str] | None = None) -> int:
         minutes = (time.perf_counter() - start) / 60
         if args.resume and meta_path.exists():  # the runs kept from before took their time too
             minutes += json.loads(meta_path.read_text()).get("minutes", 0.0)
-        command = "python -m studies.essay " + " ".join(sys.argv[1:] if argv is None else argv)
-        write_json(meta_path, run_metadata(command, {
+        write_json(meta_path, run_metadata(command_line("essay", argv), {
             "plan": {k: v for k, v in vars(plan).items()}, "best_p": best_p,
             "minutes": round(minutes, 1),
             "outcomes": {k: v for k, v in runner.outcomes.items() if v != "ok"},
-            "unavailable": {n: missing[n] for n in set(plan.engines) & set(missing)},
+            "unavailable": missing,
         }))
     from .essay_report import write_report
 

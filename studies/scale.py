@@ -29,7 +29,8 @@ import engines  # noqa: E402
 from scenes.generate import at_essay_density  # noqa: E402
 from scenes.motion import simulate  # noqa: E402
 
-from .cli import CliError, Parser, prepare_out, run_cli, run_metadata, write_json  # noqa: E402
+from .cli import (CliError, Parser, command_line, prepare_out, run_cli, run_metadata,  # noqa: E402
+                  warn_unavailable, write_json)
 from .harness import COLUMNS, Job, run_isolated, scene_columns  # noqa: E402
 
 DISTS = ("uniform", "clusters")
@@ -114,9 +115,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         raise CliError(str(exc)) from None
     out = prepare_out(args.out, "scale")
-    missing = {n: r for n, r in engines.unavailable().items() if n in chosen}
-    for name, reason in missing.items():
-        print(f"WARNING: {name} is NOT AVAILABLE and was not run: {reason}", file=sys.stderr)
+    missing = warn_unavailable(chosen)
     start = time.perf_counter()
     sizes = [2**k for k in range(6, args.max_log2_n + 1)]
     partial = out / "results.partial.csv"
@@ -157,8 +156,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{last.peak_mb:>8.0f}" + (f"   stopped at {stopped[(dist, backend)]}" if (dist, backend) in stopped else ""))
     print(f"\nnumba compile of our kernels: {compile_s['cold_s']:.1f} s with an empty cache, "
           f"{compile_s['warm_s']:.2f} s from the cache (process start and imports included)")
-    command = "python -m studies.scale " + " ".join(sys.argv[1:] if argv is None else argv)
-    write_json(out / "meta.json", run_metadata(command, {
+    write_json(out / "meta.json", run_metadata(command_line("scale", argv), {
         "compile": compile_s, "stopped": {f"{d} {b}": s for (d, b), s in stopped.items()},
         "exponents": {f"{d} {b}": e for (d, b), e in exponents.items()}, "unavailable": missing,
         "minutes": round((time.perf_counter() - start) / 60, 1),

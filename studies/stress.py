@@ -33,7 +33,8 @@ from scenes.io import load_scene, save_scene  # noqa: E402
 from scenes.motion import simulate  # noqa: E402
 from scenes.stress import STRESS_SCENES  # noqa: E402
 
-from .cli import CliError, Parser, prepare_out, run_cli, run_metadata, write_json  # noqa: E402
+from .cli import (CliError, Parser, command_line, prepare_out, run_cli, run_metadata,  # noqa: E402
+                  warn_unavailable, write_json)
 from .harness import COLUMNS, Job, run_isolated, scene_columns  # noqa: E402
 
 OUTCOMES = ["exact", "extra candidates", "missed", "invalid output", "error", "crashed", "timed out", "skipped"]
@@ -247,9 +248,7 @@ def main(argv: list[str] | None = None) -> int:
         folder = prepare_out(args.save_scenes, "scenes")
         for scene in scenes:
             save_scene(scene, folder / f"{scene.name}.csv")
-    missing = {n: r for n, r in engines.unavailable().items() if n in backends}
-    for name, reason in missing.items():
-        print(f"WARNING: {name} is NOT AVAILABLE and was not run: {reason}", file=sys.stderr)
+    missing = warn_unavailable(backends)
     backends = [b for b in backends if b not in missing]
 
     start = time.perf_counter()
@@ -291,8 +290,7 @@ def main(argv: list[str] | None = None) -> int:
     max_n = pd.DataFrame(max_n)
     max_n.to_csv(out / "max_n.csv", index=False)
 
-    command = "python -m studies.stress " + " ".join(sys.argv[1:] if argv is None else argv)
-    meta = run_metadata(command, {"frames": args.frames, "timeout_s": args.timeout, "memory_mb": args.memory,
+    meta = run_metadata(command_line("stress", argv), {"frames": args.frames, "timeout_s": args.timeout, "memory_mb": args.memory,
                                   "budget_s": args.budget, "minutes": round((time.perf_counter() - start) / 60, 1),
                                   "unavailable": missing, "drift": drift})
     write_json(out / "meta.json", meta)
