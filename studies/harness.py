@@ -50,10 +50,9 @@ class InvalidOutput(Exception):
     """A backend returned something that is not a valid pair array."""
 
 
-def _count(frame: int, traj: Trajectory, candidates: np.ndarray, reports: str) -> dict[str, Any]:
-    """Missed and extra pairs of one frame against the exact reference."""
+def _count(frame: int, traj: Trajectory, got: np.ndarray, reports: str) -> dict[str, Any]:
+    """Missed and extra pairs of one frame (`got`: the candidates' keys) against the exact reference."""
     n = traj.scene.n
-    got = keys(candidates, n)
     truth = keys(traj.contacts[frame], n)
     boxes = keys(traj.box_pairs[frame], n)
     found_true = np.isin(truth, got, assume_unique=True).sum()
@@ -107,15 +106,16 @@ def measure(job: Job, traj: Trajectory, repeat: int) -> list[dict[str, Any]]:
                 t3 = time.perf_counter()
                 narrow_phase(pos, radii, candidates)
                 t4 = time.perf_counter()
+                got = keys(candidates, traj.scene.n)
                 rows.append({
                     "repeat": repeat, "frame": f, "t_update_s": t1 - t0, "t_pairs_s": t2 - t1,
                     "t_narrow_s": t4 - t3, "t_total_s": (t2 - t0) + (t4 - t3), "t_setup_s": setup,
                     "reports": backend.reports, "params": backend.describe(), "status": "ok",
                     "stats": json.dumps(backend.stats(), default=float),
-                    **_count(f, traj, candidates, backend.reports),
+                    **_count(f, traj, got, backend.reports),
                 })
                 if job.count_tunneling:
-                    seen.append(keys(candidates, traj.scene.n))
+                    seen.append(got)
                 if f == 1 and rows[-1]["t_total_s"] > job.budget_s:
                     rows[-1]["status"] = (f"skipped: a frame took {rows[-1]['t_total_s']:.3g} s, over the budget of "
                                           f"{job.budget_s:.3g} s per frame")

@@ -67,6 +67,7 @@ class EssayGrid(EssayBroadPhase):
         if not getattr(self, "_cells", None):
             return
         x0, y0, width, p_cells = self._home
+        wrap = self.params["printed_defects"]
         where: dict[int, set[tuple[int, int]]] = {}
         for cx, column in enumerate(self._cells):
             for cy, cell in enumerate(column):
@@ -76,7 +77,6 @@ class EssayGrid(EssayBroadPhase):
         for part in self._particles:
             cx = min(int((part.x - x0) / width), p_cells - 1)
             cy = min(int((part.y - y0) / width), p_cells - 1)
-            wrap = self.params["printed_defects"]
             expected = {(nx % p_cells, ny % p_cells) if wrap else (nx, ny)
                         for nx in range(cx - 1, cx + 2) for ny in range(cy - 1, cy + 2)
                         if (wrap or 0 <= nx) and (wrap or 0 <= ny) and nx < p_cells and ny < p_cells}
