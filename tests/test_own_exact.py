@@ -24,7 +24,8 @@ EXACT = [
     ("own.grid", {}),
     ("own.grid", {"p": 1}),
     ("own.grid", {"p": 7}),
-    ("own.grid", {"cell": 0.3}),  # cells far smaller than most objects: many cells per object
+    ("own.grid", {"cell": 0.3}),  # cells far smaller than most objects: most are "large"
+    ("own.grid", {"coherent": False}),
     ("own.quadtree", {}),
     ("own.quadtree", {"capacity": 1}),
     ("own.quadtree", {"capacity": 2, "max_depth": 3}),
@@ -104,12 +105,46 @@ def test_quadtree_straddlers_stay_high_and_are_found():
     assert tree.stats()["depth"] >= 3
 
 
-def test_grid_reports_each_pair_once_with_many_shared_cells():
-    # Two large overlapping boxes share hundreds of cells; the pair must appear exactly once.
-    grid = engines.create("own.grid", p=30)
-    grid.reset([[0.0, 0.0], [3.0, 3.0]], [10.0, 10.0])
-    assert grid.pairs().tolist() == [[0, 1]]
-    assert grid.stats()["tests"] > 100
+def test_grid_large_objects_are_found_once_against_small_and_large():
+    # Two big circles far wider than a cell, overlapping each other and many small ones.
+    rng = np.random.default_rng(1)
+    pos = np.vstack([[500.0, 500.0], [520.0, 510.0], rng.uniform(0, 1000, (400, 2))])
+    radii = np.concatenate([[150.0, 90.0], np.full(400, 4.0)])
+    grid = engines.create("own.grid")
+    grid.reset(pos, radii)
+    grid.validate()
+    got = grid.pairs()
+    assert is_canonical(got, len(pos)) is None
+    assert set(map(tuple, got.tolist())) == set(map(tuple, brute_pairs(pos, radii).tolist()))
+    assert grid.stats()["large"] == 2
+    assert (0, 1) in set(map(tuple, got.tolist()))
+
+
+def test_grid_keeps_its_layout_while_it_fits_and_lays_out_again_when_objects_leave_it():
+    scene = generate("uniform", 600, seed=7)
+    grid = engines.create("own.grid")
+    grid.reset(scene.positions, scene.radii)
+    moved = scene.positions + 0.5
+    grid.update(moved)  # still inside (the extent changed by less than half): layout kept
+    assert grid.stats()["relayout"] == 0
+    far = scene.positions * 3.0 - 1000.0  # mostly outside the old cells
+    for positions in (moved, far):
+        grid.update(positions)
+        grid.validate()
+        assert set(map(tuple, grid.pairs().tolist())) == set(map(tuple, brute_pairs(positions, scene.radii).tolist()))
+    assert grid.stats()["relayout"] == 1
+
+
+def test_grid_coherent_order_moves_few_objects_between_frames():
+    traj = simulate(generate("uniform", 2000, seed=8), frames=3)
+    grid = engines.create("own.grid")
+    grid.reset(traj.positions[0], traj.scene.radii)
+    grid.update(traj.positions[1])
+    assert grid.stats()["moved"] < 0.2 * 2000  # last frame's cell order is nearly this frame's
+    scratch = engines.create("own.grid", coherent=False)
+    scratch.reset(traj.positions[0], traj.scene.radii)
+    scratch.update(traj.positions[1])
+    assert scratch.stats()["moved"] > 0.9 * 2000  # input order is spatially random
 
 
 def test_incremental_sap_repairs_small_motion_and_resorts_after_large():
