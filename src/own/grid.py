@@ -274,7 +274,7 @@ class UniformGrid(BroadPhase):
             positions, self.radii, order, self._p, self._cell, self._max_cells, self._layout
         )
         ncells = int(self._layout[NX] * self._layout[NY])
-        self._stats = {"cells": ncells, "large": self.n - int(self._start[ncells]), "moved": moved,
+        self._stats = {"cells": ncells, "cell": float(self._layout[CW]), "large": self.n - int(self._start[ncells]), "moved": moved,
                        "relayout": int(relayout)}
 
     def _pairs(self):

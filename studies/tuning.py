@@ -1,0 +1,77 @@
+"""Find a backend's best parameters on a scene: sweep each knob in turn, keeping the best so far.
+
+Knobs are swept one at a time (coordinate descent: the second knob is swept at the first one's
+optimum), which is how the essay tuned its grid and quadtree, and the default parameters are
+measured in the same run so that the loss of the default rule is a side-by-side ratio.
+A setting that misses pairs is never chosen.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from scenes.motion import Trajectory
+
+from .knobs import KNOBS, Knob
+from .trials import Trial, run_trial
+
+
+@dataclass
+class Sweep:
+    knob: Knob
+    held: dict[str, Any]  # the other parameters during this sweep
+    points: list[tuple[Any, Trial]]
+
+    def best(self) -> tuple[Any, Trial] | None:
+        good = [(v, t) for v, t in self.points if t.ok and t.missed == 0]
+        return min(good, key=lambda vt: vt[1].median_ms) if good else None
+
+
+@dataclass
+class Tuned:
+    backend: str
+    params: dict[str, Any]  # the best parameters found ({} if no setting finished cleanly)
+    best: Trial | None
+    default: Trial
+    sweeps: list[Sweep] = field(default_factory=list)
+
+    @property
+    def loss(self) -> float:
+        """How much slower the default is than the optimum (0.1 = 10 %); NaN if either failed."""
+        if self.best is None or not self.default.ok:
+            return float("nan")
+        return self.default.median_ms / self.best.median_ms - 1.0
+
+    @property
+    def default_within_noise(self) -> bool:
+        return self.best is not None and self.default.ok and self.default.overlaps(self.best)
+
+
+Record = Callable[[str, str, Any, Trial], None]
+
+
+def tune_backend(traj: Trajectory, backend: str, repeats: int = 3, budget_s: float = float("inf"),
+                 timeout_s: float = 120.0, record: Record | None = None,
+                 knobs: list[Knob] | None = None) -> Tuned:
+    """Sweep every knob of `backend` on `traj`; `record(backend, param, value, trial)` sees each point."""
+    params: dict[str, Any] = {}
+    sweeps = []
+    best: Trial | None = None
+    for knob in KNOBS[backend] if knobs is None else knobs:
+        points = []
+        for value in knob.values(traj.scene):
+            trial = run_trial(traj, backend, {**params, knob.param: value}, repeats, budget_s, timeout_s)
+            points.append((value, trial))
+            if record:
+                record(backend, knob.param, value, trial)
+        sweep = Sweep(knob, dict(params), points)
+        sweeps.append(sweep)
+        found = sweep.best()
+        if found:
+            params[knob.param] = found[0]
+            best = found[1]
+    default = run_trial(traj, backend, {}, repeats, budget_s, timeout_s)
+    if record:
+        record(backend, "default", None, default)
+    return Tuned(backend, params if best else {}, best, default, sweeps)
