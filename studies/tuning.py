@@ -33,19 +33,19 @@ class Tuned:
     backend: str
     params: dict[str, Any]  # the best parameters found ({} if no setting finished cleanly)
     best: Trial | None
-    default: Trial
+    default: Trial | None  # None when the defaults were not measured
     sweeps: list[Sweep] = field(default_factory=list)
 
     @property
     def loss(self) -> float:
         """How much slower the default is than the optimum (0.1 = 10 %); NaN if either failed."""
-        if self.best is None or not self.default.ok:
+        if self.best is None or self.default is None or not self.default.ok:
             return float("nan")
         return self.default.median_ms / self.best.median_ms - 1.0
 
     @property
     def default_within_noise(self) -> bool:
-        return self.best is not None and self.default.ok and self.default.overlaps(self.best)
+        return self.best is not None and self.default is not None and self.default.ok and self.default.overlaps(self.best)
 
 
 Record = Callable[[str, str, Any, Trial], None]
@@ -53,8 +53,9 @@ Record = Callable[[str, str, Any, Trial], None]
 
 def tune_backend(traj: Trajectory, backend: str, repeats: int = 3, budget_s: float = float("inf"),
                  timeout_s: float = 120.0, record: Record | None = None,
-                 knobs: list[Knob] | None = None) -> Tuned:
-    """Sweep every knob of `backend` on `traj`; `record(backend, param, value, trial)` sees each point."""
+                 knobs: list[Knob] | None = None, with_default: bool = True) -> Tuned:
+    """Sweep every knob of `backend` on `traj`; `record(backend, param, value, trial)` sees each point.
+    With `with_default`, the default parameters are measured too (Tuned.default)."""
     params: dict[str, Any] = {}
     sweeps = []
     best: Trial | None = None
@@ -71,6 +72,8 @@ def tune_backend(traj: Trajectory, backend: str, repeats: int = 3, budget_s: flo
         if found:
             params[knob.param] = found[0]
             best = found[1]
+    if not with_default:
+        return Tuned(backend, params if best else {}, best, None, sweeps)
     default = run_trial(traj, backend, {}, repeats, budget_s, timeout_s)
     if record:
         record(backend, "default", None, default)

@@ -120,6 +120,16 @@ def test_grid_large_objects_are_found_once_against_small_and_large():
     assert (0, 1) in set(map(tuple, got.tolist()))
 
 
+def test_grid_default_cell_holds_equal_radii_in_cells_not_in_the_large_bucket():
+    # Sparse enough that the cell is not enlarged: it is exactly one diameter, and must still fit.
+    scene = generate("uniform", 500, radius=2.0, seed=3, box=(0.0, 0.0, 80.0, 80.0))
+    for shift in (0.0, 1e9):
+        grid = engines.create("own.grid")
+        grid.reset(scene.positions + shift, scene.radii)
+        assert grid.stats()["large"] == 0
+        assert grid.stats()["cell"] < 4.0 * (1 + 1e-3)
+
+
 def test_grid_keeps_its_layout_while_it_fits_and_lays_out_again_when_objects_leave_it():
     scene = generate("uniform", 600, seed=7)
     grid = engines.create("own.grid")
@@ -135,16 +145,17 @@ def test_grid_keeps_its_layout_while_it_fits_and_lays_out_again_when_objects_lea
     assert grid.stats()["relayout"] == 1
 
 
-def test_grid_coherent_order_moves_few_objects_between_frames():
+def test_grid_counts_objects_that_change_cell_the_same_with_or_without_coherence():
     traj = simulate(generate("uniform", 2000, seed=8), frames=3)
-    grid = engines.create("own.grid")
-    grid.reset(traj.positions[0], traj.scene.radii)
-    grid.update(traj.positions[1])
-    assert grid.stats()["moved"] < 0.2 * 2000  # last frame's cell order is nearly this frame's
-    scratch = engines.create("own.grid", coherent=False)
-    scratch.reset(traj.positions[0], traj.scene.radii)
-    scratch.update(traj.positions[1])
-    assert scratch.stats()["moved"] > 0.9 * 2000  # input order is spatially random
+    moved = {}
+    for coherent in (True, False):
+        grid = engines.create("own.grid", coherent=coherent)
+        grid.reset(traj.positions[0], traj.scene.radii)
+        assert grid.stats()["moved"] == 2000  # the first frame puts everything somewhere
+        grid.update(traj.positions[1])
+        moved[coherent] = grid.stats()["moved"]
+    assert moved[True] == moved[False]
+    assert 0 < moved[True] < 0.05 * 2000  # objects moving 1/6 unit per frame seldom change cell
 
 
 def test_incremental_sap_repairs_small_motion_and_resorts_after_large():

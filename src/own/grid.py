@@ -33,6 +33,9 @@ MAX_CELLS_PER_OBJECT = 4
 # The default cell is one diameter of this reference radius, capped at 4 median radii so that a
 # few huge objects go to the large bucket instead of coarsening the whole grid.
 LARGE_RADIUS_IN_MEDIANS = 4.0
+# Margin of the small-object limit, in ulps of the largest coordinate involved (a few suffice:
+# the cell index and the box bounds each round once or twice).
+ROUNDING_ULPS = 64
 # Layout as a float array: origin x, y; cell width, height; cells along x, y.
 OX, OY, CW, CH, NX, NY = range(6)
 # Slot box columns (boxes are stored in slot order, one row per slot, for sequential scans).
@@ -70,7 +73,8 @@ def grid_layout(positions, p, cell, max_cells, layout):
 
     It still fits while every centre is inside it and the centres span at least half of it on
     each axis. p > 0 gives p x p cells over the centres' extent; otherwise square cells of size
-    `cell`, enlarged until there are at most `max_cells`.
+    `cell` (plus the rounding margin, so a diameter of `cell` fits), enlarged until there are at
+    most `max_cells`.
     """
     n = positions.shape[0]
     x0, y0, x1, y1 = centre_extents(positions)
@@ -89,7 +93,10 @@ def grid_layout(positions, p, cell, max_cells, layout):
         c = cell
         if not c > 0:  # all radii zero: about one object per cell
             c = math.sqrt(max(sx * sy, sx * sx, sy * sy) / max(n, 1)) or 1.0
-        c = max(c, max(sx, sy) * 1e-9)
+        # Room for the rounding margin of small_limit, so that objects whose diameter equals the
+        # requested cell still count as small.
+        far = max(abs(x0), abs(x1), abs(y0), abs(y1))
+        c = max(c, max(sx, sy) * 1e-9) + ROUNDING_ULPS * 2 * np.finfo(np.float64).eps * (far + 2 * c)
         while (math.floor(sx / c) + 1) * (math.floor(sy / c) + 1) > max_cells:
             c *= 1.25
         cw = ch = c
@@ -106,14 +113,15 @@ def small_limit(positions, layout):
     far = max(abs(x0), abs(x1), abs(y0), abs(y1), abs(layout[OX]), abs(layout[OY]),
               abs(layout[OX] + layout[NX] * layout[CW]), abs(layout[OY] + layout[NY] * layout[CH]))
     c = min(layout[CW], layout[CH])
-    return c - 64 * np.finfo(np.float64).eps * (far + c)
+    return c - ROUNDING_ULPS * np.finfo(np.float64).eps * (far + c)
 
 
 @nb.njit(cache=True)
-def grid_build(positions, radii, order, layout, limit):
+def grid_build(positions, radii, order, last_key, layout, limit):
     """Counting sort of objects into cells (large ones into bucket nx * ny), stable in `order`.
 
-    Returns (slot ids, slot boxes (n, 4), slot keys, cell starts, slots that changed object).
+    `last_key` holds last frame's cell per slot of `order` (or -1s).
+    Returns (slot ids, slot boxes (n, 4), slot keys, cell starts, objects that changed cell).
     Cell c holds slots start[c]:start[c + 1]; the large bucket is start[nx * ny]:n.
     """
     n = positions.shape[0]
@@ -124,6 +132,7 @@ def grid_build(positions, radii, order, layout, limit):
     # the scatter then reads those and, when `order` is last frame's, writes almost in place.
     key = np.empty(n, dtype=np.int64)
     xyr = np.empty((n, 3))
+    moved = 0
     start = np.zeros(ncells + 2, dtype=np.int64)
     for k in range(n):
         i = order[k]
@@ -134,19 +143,18 @@ def grid_build(positions, radii, order, layout, limit):
             c = cell_of(y, oy, inv_y, ny) * nx + cell_of(x, ox, inv_x, nx)
         key[k] = c
         start[c] += 1
+        if c != last_key[k]:
+            moved += 1
     for c in range(1, ncells + 1):  # start[c] = end of cell c
         start[c] += start[c - 1]
     start[ncells + 1] = n
     ids = np.empty(n, dtype=np.int64)
     box = np.empty((n, 4))
     skey = np.empty(n, dtype=np.int64)
-    moved = 0
     for k in range(n - 1, -1, -1):  # backwards, filling each cell from its end: stable
         c = key[k]
         start[c] -= 1
         s = start[c]
-        if s != k:
-            moved += 1
         ids[s], skey[s] = order[k], c
         x, y, r = xyr[k, 0], xyr[k, 1], xyr[k, 2]
         box[s, LX], box[s, HX], box[s, LY], box[s, HY] = x - r, x + r, y - r, y + r
@@ -219,12 +227,14 @@ def grid_pairs(ids, box, skey, start, layout, limit, buf):
 
 
 @nb.njit(cache=True)
-def grid_update(positions, radii, order, p, cell, max_cells, layout):
+def grid_update(positions, radii, order, last_key, p, cell, max_cells, layout):
     """One call per frame (each compiled call from Python costs microseconds): the layout, the
     small-object limit and the build. Returns (relayout, limit, *grid_build's results)."""
     relayout = grid_layout(positions, p, cell, max_cells, layout)
     limit = small_limit(positions, layout)
-    ids, box, skey, start, moved = grid_build(positions, radii, order, layout, limit)
+    if relayout:
+        last_key = np.full(positions.shape[0], -1, dtype=np.int64)  # cells of another layout
+    ids, box, skey, start, moved = grid_build(positions, radii, order, last_key, layout, limit)
     return relayout, limit, ids, box, skey, start, moved
 
 
@@ -264,14 +274,19 @@ class UniformGrid(BroadPhase):
         self._max_cells = MAX_CELLS_PER_OBJECT * self.n + 16
         self._layout = np.zeros(6)
         self._ids = np.arange(self.n, dtype=np.int64)
+        self._key = np.full(self.n, -1, dtype=np.int64)
         self._collect = PairCollector()
         self._update(positions)
 
     def _update(self, positions):
         self._positions = positions
-        order = self._ids if self.params["coherent"] else np.arange(self.n, dtype=np.int64)
+        if self.params["coherent"]:
+            order, last_key = self._ids, self._key
+        else:  # input order; last frame's cells looked up per object
+            order, last_key = np.arange(self.n, dtype=np.int64), np.empty(self.n, dtype=np.int64)
+            last_key[self._ids] = self._key
         relayout, self._limit, self._ids, self._box, self._key, self._start, moved = grid_update(
-            positions, self.radii, order, self._p, self._cell, self._max_cells, self._layout
+            positions, self.radii, order, last_key, self._p, self._cell, self._max_cells, self._layout
         )
         ncells = int(self._layout[NX] * self._layout[NY])
         self._stats = {"cells": ncells, "cell": float(self._layout[CW]), "large": self.n - int(self._start[ncells]), "moved": moved,

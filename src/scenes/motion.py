@@ -82,6 +82,11 @@ class Trajectory:
     def frames(self) -> int:
         return int(self.positions.shape[0])
 
+    def head(self, frames: int) -> "Trajectory":
+        """The first `frames` frames (for shorter trials on the same scene)."""
+        k = max(1, min(frames, self.frames))
+        return Trajectory(self.scene, self.positions[:k], self.box_pairs[:k], self.contacts[:k], self.velocities[:k])
+
     @cached_property
     def swept_contacts(self) -> np.ndarray:
         """Keys (i * n + j) of pairs whose straight paths between two frames came within
