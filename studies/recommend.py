@@ -39,11 +39,13 @@ HOPELESS = 20.0
 # Tune only backends within this factor of the leader's default time (tuning rarely gains more).
 TUNE_WITHIN = 3.0
 TUNE_FRAMES = 3  # frames per point of the tuning sweep (one repeat)
+REPORT_S = 3.0  # of the time limit, kept for writing the report and figure
 
 
-def trial_frames(n: int) -> int:
-    """Timed frames per trial: fewer at large n, so the whole run stays near a minute."""
-    return 20 if n <= 10_000 else 10 if n <= 30_000 else 5 if n <= 150_000 else 3
+def trial_length(n: int) -> tuple[int, int]:
+    """(timed frames, repeats) per trial: fewer at large n, so the whole run stays near a minute."""
+    frames = 20 if n <= 10_000 else 10 if n <= 30_000 else 5 if n <= 150_000 else 3
+    return frames, 3 if n <= 30_000 else 2
 
 
 def run_order(names: list[str]) -> list[str]:
@@ -171,13 +173,13 @@ def parse(argv):
     add_scene_options(p)
     p.add_argument("--backends", default="*", metavar="PATTERN[,PATTERN]", help="globs (default: every backend)")
     p.add_argument("--frames", type=int, help="timed frames per trial (default: 20, fewer at large n)")
-    p.add_argument("--repeat", type=int, default=3, help="repeats per trial (default 3)")
+    p.add_argument("--repeat", type=int, help="repeats per trial (default 3, 2 above n = 30000)")
     p.add_argument("--time-limit", type=float, default=60.0, metavar="S",
                    help="aim to finish within S seconds; backends left when time runs out are not tried (default 60)")
     p.add_argument("--no-tune", action="store_true", help="use every backend's default parameters")
     p.add_argument("--out", metavar="DIR", help="output folder (default results/recommend-<date>-<time>)")
     args = p.parse_args(argv)
-    if (args.frames is not None and args.frames < 1) or args.repeat < 1:
+    if (args.frames is not None and args.frames < 1) or (args.repeat is not None and args.repeat < 1):
         raise CliError("--frames and --repeat must be at least 1")
     if not args.time_limit > 0:
         raise CliError("--time-limit must be positive")
@@ -195,12 +197,15 @@ def main(argv: list[str] | None = None) -> int:
     missing = warn_unavailable(chosen)
     backends = run_order([b for b in chosen if b not in missing])
     start = time.perf_counter()
-    deadline = start + args.time_limit
-    frames = args.frames or trial_frames(scene.n)
+    deadline = start + args.time_limit - REPORT_S
+    frames, repeats = trial_length(scene.n)
+    shortened = (args.frames is None and frames < 20) or (args.repeat is None and repeats < 3)
+    args.frames, args.repeat = args.frames or frames, args.repeat or repeats
+    frames = args.frames
     traj = simulate(scene, frames + 1)
     traits = measure_traits(traj)
     notes = [f"Trials: {frames} timed frames x {args.repeat} repeats per backend"
-             + ("" if args.frames else f" (shortened for n = {scene.n:,})" if frames < 20 else "")
+             + (f" (shortened for n = {scene.n:,})" if shortened else "")
              + f"; tuning sweeps {TUNE_FRAMES} frames x 1 repeat per point."]
     print(f"scene {scene.name}: {', '.join(traits.words())}")
     print(notes[0], flush=True)
@@ -211,14 +216,17 @@ def main(argv: list[str] | None = None) -> int:
     writer.writeheader()
 
     def trial(backend, params, repeats, budget, share=1):
-        """One trial, its rows written as they come; it may use 1/share of the time left x 4."""
+        """One trial, its rows written as they come; it may use twice its fair share of the time left."""
         def write(rows):
             for row in rows:
                 writer.writerow({"backend": backend, **fixed, **row})
             fh.flush()
         left = deadline - time.perf_counter()
-        timeout = max(1.0, min(120.0, left, 4 * left / share))
-        return run_trial(traj, backend, params, repeats, budget, timeout, write)
+        timeout = max(1.0, min(120.0, left, 2 * left / share))
+        result = run_trial(traj, backend, params, repeats, budget, timeout, write)
+        if result.status.startswith("timeout"):
+            result.status = f"stopped: not done within its {timeout:.0f} s share of the time limit"
+        return result
 
     entries: list[Entry] = []
     skipped: list[str] = []
@@ -250,7 +258,7 @@ def main(argv: list[str] | None = None) -> int:
     plot(entries, groups, out / "recommend.png", f"{scene.name}: n={scene.n}")
     (out / "recommend.md").write_text(markdown(lines, entries, groups, notes))
     write_json(out / "meta.json", run_metadata(command_line("recommend", argv), {
-        "scene": fixed, "traits": vars(traits), "frames": frames, "repeats": args.repeat,
+        "scene": fixed, "traits": vars(traits), "frames": args.frames, "repeats": args.repeat,
         "unavailable": missing, "not_tried": skipped,
         "ranking": [[{"backend": e.backend, "params": e.trial.params, "median_ms": e.trial.median_ms} for e in g]
                     for g in groups]}))
