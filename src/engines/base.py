@@ -77,6 +77,12 @@ class BroadPhase(ABC):
     def validate(self) -> None:
         """Check the structure's invariants; raises AssertionError when one is broken."""
 
+    def structure(self) -> dict[str, np.ndarray]:
+        """What the structure looks like now, for drawing: "cells" or "nodes" as (k, 4) rectangles
+        (x0, y0, x1, y1), or "intervals" (n, 2) along the sweep axis "axis" (0 x, 1 y).
+        Empty when the backend does not expose it (engines keep theirs inside the binding)."""
+        return {}
+
     def close(self) -> None:
         """Release engine resources (worlds, spaces)."""
 

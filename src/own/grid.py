@@ -297,6 +297,13 @@ class UniformGrid(BroadPhase):
         self._stats["tests"] = tests
         return out
 
+    def structure(self):
+        nx, ny = int(self._layout[NX]), int(self._layout[NY])
+        ox, oy, cw, ch = self._layout[[OX, OY, CW, CH]]
+        cx, cy = np.meshgrid(np.arange(nx), np.arange(ny))
+        cx, cy = cx.ravel(), cy.ravel()
+        return {"cells": np.column_stack([ox + cx * cw, oy + cy * ch, ox + (cx + 1) * cw, oy + (cy + 1) * ch])}
+
     def validate(self):
         nx, ny = int(self._layout[NX]), int(self._layout[NY])
         ncells = nx * ny

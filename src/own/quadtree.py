@@ -184,6 +184,9 @@ class Quadtree(BroadPhase):
         self._stats = {"nodes": len(self._nodes), "depth": int(self._nodes[:, DEPTH].max()), "tests": tests, "visited": visited}
         return out
 
+    def structure(self):
+        return {"nodes": self._bounds.copy()}
+
     def _mid(self, k: int) -> tuple[float, float]:
         x0, y0, x1, y1 = self._bounds[k]
         return 0.5 * (x0 + x1), 0.5 * (y0 + y1)

@@ -135,6 +135,10 @@ class SweepAndPrune(BroadPhase):
         self._stats["axis_overlaps"] = axis_hits
         return out
 
+    def structure(self):
+        s_lo, s_hi = self._sorted[0], self._sorted[1]
+        return {"intervals": np.column_stack([s_lo, s_hi]), "axis": np.array(self._stats["axis"])}
+
     def validate(self):
         order, s_lo = self._order[:self.n], self._sorted[0]
         assert np.array_equal(np.sort(order), np.arange(self.n)), "sort order is not a permutation"

@@ -1,0 +1,127 @@
+"""Draw one frame: the circles, the backend's structure, candidate pairs, true overlaps, misses.
+
+Every drawn layer is one matplotlib collection tagged with a gid ("circles", "cells", "nodes",
+"intervals", "candidates", "overlaps", "missed"), so what a picture shows can be counted.
+"""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.collections import EllipseCollection, LineCollection  # noqa: E402
+
+from engines.pairs import keys  # noqa: E402
+
+STYLE = {
+    "cells": {"colors": "0.75", "linewidths": 0.4},
+    "nodes": {"colors": "tab:purple", "linewidths": 0.6},
+    "intervals": {"colors": "tab:blue", "linewidths": 1.0},
+    "candidates": {"colors": "0.55", "linewidths": 0.5},
+    "overlaps": {"colors": "tab:green", "linewidths": 1.6},
+    "missed": {"colors": "red", "linewidths": 2.2},
+}
+
+
+def _rect_outlines(rects: np.ndarray) -> np.ndarray:
+    x0, y0, x1, y1 = rects.T
+    return np.stack([np.column_stack(c) for c in ((x0, y0), (x1, y0), (x1, y1), (x0, y1), (x0, y0))], axis=1)
+
+
+def _segments(positions: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    return np.stack([positions[pairs[:, 0]], positions[pairs[:, 1]]], axis=1)
+
+
+def _add(ax, gid: str, segments: np.ndarray, zorder: float) -> None:
+    collection = LineCollection(list(segments), zorder=zorder, **STYLE[gid])
+    collection.set_gid(gid)
+    ax.add_collection(collection)
+
+
+def interval_rows(intervals: np.ndarray) -> np.ndarray:
+    """A row per interval such that intervals in one row do not overlap (greedy, sorted by start)."""
+    rows = np.zeros(len(intervals), dtype=int)
+    ends: list[float] = []
+    for k in np.argsort(intervals[:, 0], kind="stable"):
+        lo, hi = intervals[k]
+        for row, end in enumerate(ends):
+            if lo > end:
+                ends[row] = hi
+                rows[k] = row
+                break
+        else:
+            rows[k] = len(ends)
+            ends.append(hi)
+    return rows
+
+
+def draw_frame(fig, positions: np.ndarray, radii: np.ndarray, structure: dict, candidates: np.ndarray,
+               overlaps: np.ndarray, must_find: np.ndarray, title: str) -> dict[str, int]:
+    """Draw into `fig` (cleared); returns how many elements each layer holds.
+
+    `overlaps`: pairs of truly overlapping circles (highlighted where found); `must_find`: the
+    pairs the backend promises (box overlaps or contacts); those absent from `candidates` are
+    drawn in red as missed.
+    """
+    fig.clear()
+    intervals = structure.get("intervals")
+    if intervals is not None:
+        ax, strip = fig.subplots(2, 1, gridspec_kw={"height_ratios": [4, 1]})
+    else:
+        ax, strip = fig.subplots(1, 1), None
+    n = len(radii)
+    circles = EllipseCollection(2 * radii, 2 * radii, np.zeros(n), units="xy", offsets=positions,
+                                offset_transform=ax.transData, facecolors="none", edgecolors="tab:blue",
+                                linewidths=0.6, zorder=2)
+    circles.set_gid("circles")
+    ax.add_collection(circles)
+    counts = {"circles": n}
+    for layer in ("cells", "nodes"):
+        if layer in structure:
+            _add(ax, layer, _rect_outlines(structure[layer]), 1)
+            counts[layer] = len(structure[layer])
+    found = np.isin(keys(overlaps, n), keys(candidates, n))
+    missed = must_find[~np.isin(keys(must_find, n), keys(candidates, n))]
+    _add(ax, "candidates", _segments(positions, candidates), 3)
+    _add(ax, "overlaps", _segments(positions, overlaps[found]), 4)
+    _add(ax, "missed", _segments(positions, missed), 5)
+    counts.update(candidates=len(candidates), overlaps=int(found.sum()), missed=len(missed))
+    if n:
+        lo = (positions - radii[:, None]).min(axis=0)
+        hi = (positions + radii[:, None]).max(axis=0)
+        pad = 0.02 * max(float((hi - lo).max()), 1e-9)
+        ax.set_xlim(lo[0] - pad, hi[0] + pad)
+        ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_title(title, fontsize=9)
+    if strip is not None:
+        axis = int(structure["axis"])
+        rows = interval_rows(intervals)
+        segs = np.stack([np.column_stack([intervals[:, 0], rows]), np.column_stack([intervals[:, 1], rows])], axis=1)
+        _add(strip, "intervals", segs, 1)
+        counts["intervals"] = len(intervals)
+        strip.set_xlim(*(ax.get_xlim() if axis == 0 else ax.get_ylim()))
+        strip.set_ylim(-1, max(rows.max(initial=0) + 1, 1))
+        strip.set_yticks([])
+        strip.set_xlabel(f"intervals along the sweep axis ({'xy'[axis]}), packed into rows", fontsize=8)
+    fig.tight_layout()
+    return counts
+
+
+def counted(fig) -> dict[str, int]:
+    """Elements per tagged layer in a drawn figure, read back from its collections."""
+    out: dict[str, int] = {}
+    for ax in fig.axes:
+        for c in ax.collections:
+            gid = c.get_gid()
+            if gid == "circles":
+                out[gid] = len(c.get_offsets())
+            elif gid:
+                out[gid] = out.get(gid, 0) + len(c.get_segments())
+    return out
+
+
+def new_figure(with_strip: bool = False):
+    return plt.figure(figsize=(8, 9.5 if with_strip else 8))
