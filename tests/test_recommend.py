@@ -1,0 +1,82 @@
+"""`python -m studies.recommend`: ranking with ties, misses flagged, the verdict, and the files."""
+
+from __future__ import annotations
+
+import json
+
+import pandas as pd
+
+from fakes import Lossy, register
+from scenes import generate
+from scenes.io import save_scene
+from scenes.motion import simulate
+from studies import recommend
+from studies.cli import run_cli
+from studies.recommend import Entry, rank, verdict
+from studies.traits import measure_traits
+from studies.trials import Trial
+
+
+def entry(name, ms, low, high, missed=0, status="ok"):
+    return Entry(name, Trial(name, {}, status, ms, low, high, missed))
+
+
+def test_overlapping_spreads_are_tied_and_misses_are_never_ranked():
+    a, b, c = entry("a", 1.0, 0.9, 1.1), entry("b", 1.05, 1.0, 1.2), entry("c", 2.0, 1.9, 2.1)
+    fast_but_lossy = entry("lossy", 0.1, 0.1, 0.1, missed=4)
+    broken = entry("broken", float("nan"), float("nan"), float("nan"), status="crashed: signal 11 (SIGSEGV)")
+    groups = rank([c, fast_but_lossy, b, broken, a])
+    assert [[e.backend for e in g] for g in groups] == [["a", "b"], ["c"]]
+    traits = measure_traits(simulate(generate("uniform", 100, seed=1), 2))
+    text = "\n".join(verdict(groups, [a, b, c, fast_but_lossy, broken], traits))
+    assert "Use a " in text and "Tied with it" in text and "b (" in text
+    assert "Runner-up: b" in text and "(tied)" in text
+    assert "lossy (4 missed)" in text and "Use lossy" not in text
+
+
+def test_nothing_is_recommended_when_everything_missed():
+    traits = measure_traits(simulate(generate("uniform", 50, seed=1), 2))
+    text = "\n".join(verdict(rank([entry("x", 1.0, 1.0, 1.0, missed=1)]), [], traits))
+    assert "nothing can be recommended" in text
+
+
+def test_traits_name_clumping_spread_and_size():
+    clumped = measure_traits(simulate(generate("gauss_x", 3000, radii=(1.0, 100.0), seed=2), 2))
+    words = ", ".join(clumped.words())
+    assert "clumped along x" in words and "radii spread" in words
+    even = ", ".join(measure_traits(simulate(generate("uniform", 3000, seed=2), 2)).words())
+    assert "spread evenly" in even and "similar sizes" in even
+
+
+def test_end_to_end_on_a_scene_file_flags_a_lossy_backend(tmp_path, monkeypatch, capsys):
+    register(monkeypatch, Lossy)
+    monkeypatch.setitem(Lossy.defaults, "drop", 2)  # misses two pairs every frame
+    scene_file = tmp_path / "scene.csv"
+    save_scene(generate("clusters", 400, radius=12.0, seed=4), scene_file)
+    out = tmp_path / "rec"
+    assert recommend.main(["--scene", str(scene_file), "--backends", "own.grid,own.sap*,test.lossy",
+                           "--frames", "3", "--repeat", "2", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "Use own." in printed and "test.lossy" in printed and "missed" in printed
+    md = (out / "recommend.md").read_text()
+    assert "| - | test.lossy |" in md  # listed, unranked
+    assert (out / "recommend.png").stat().st_size > 5000
+    rows = pd.read_csv(out / "results.csv")
+    assert set(rows.backend) >= {"own.grid", "own.sap", "test.lossy"}
+    ranking = json.loads((out / "meta.json").read_text())["ranking"]
+    assert all(e["backend"] != "test.lossy" for g in ranking for e in g)
+
+
+def test_the_time_limit_stops_trying_and_says_so(tmp_path, capsys):
+    assert recommend.main(["--n", "300", "--backends", "own.*", "--no-tune", "--time-limit", "3.5",
+                           "--frames", "2", "--repeat", "2", "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    assert "Not tried, the time limit of 3.5 s ran out" in printed
+
+
+def test_bad_input_is_a_one_line_error(tmp_path, capsys):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("x,y,r\n1,2,-3\n")
+    assert run_cli("recommend", recommend.main, ["--scene", str(bad), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "bad.csv" in err and err.count("\n") == 1
