@@ -32,7 +32,7 @@ class Sweep:
 class Tuned:
     backend: str
     params: dict[str, Any]  # the best parameters found ({} if no setting finished cleanly)
-    best: Trial | None
+    best: Trial | None  # those parameters measured again after the sweeps
     default: Trial | None  # None when the defaults were not measured
     sweeps: list[Sweep] = field(default_factory=list)
 
@@ -74,6 +74,12 @@ def tune_backend(traj: Trajectory, backend: str, repeats: int = 3, budget_s: flo
             best = found[1]
     if not with_default:
         return Tuned(backend, params if best else {}, best, None, sweeps)
+    # The best of many noisy points is biased low (the winner's curse): the loss of the default
+    # comes from the best setting and the default measured again, one after the other.
+    if best is not None:
+        best = run_trial(traj, backend, params, repeats, budget_s, timeout_s)
+        if record:
+            record(backend, "best", None, best)
     default = run_trial(traj, backend, {}, repeats, budget_s, timeout_s)
     if record:
         record(backend, "default", None, default)

@@ -49,8 +49,8 @@ def test_quick_tune_end_to_end_writes_rows_figures_and_best(tmp_path, capsys):
     assert tune.main(["--n", "128", "--quick", "--backends", "own.quadtree,own.sap", "--sizes", "64,128",
                       "--out", str(out)]) == 0
     rows = pd.read_csv(out / "tune.csv")
-    # quadtree: 7 capacities + 7 depths + default; sap: 3 axes + default; at both sizes.
-    assert len(rows) == 2 * (7 + 7 + 1 + 3 + 1)
+    # quadtree: 7 capacities + 7 depths; sap: 3 axes; at both sizes.
+    assert len(rows) == 2 * (7 + 7 + 2 + 3 + 2)  # + the best again and the default, per backend
     assert set(rows.n) == {64, 128} and (rows.status == "ok").all()
     best = pd.read_csv(out / "best.csv")
     assert set(best.param) == {"capacity", "max_depth", "axis"}
