@@ -200,8 +200,7 @@ def main(argv: list[str] | None = None) -> int:
     deadline = start + args.time_limit - REPORT_S
     frames, repeats = trial_length(scene.n)
     shortened = (args.frames is None and frames < 20) or (args.repeat is None and repeats < 3)
-    args.frames, args.repeat = args.frames or frames, args.repeat or repeats
-    frames = args.frames
+    frames, args.repeat = args.frames or frames, args.repeat or repeats
     traj = simulate(scene, frames + 1)
     traits = measure_traits(traj)
     notes = [f"Trials: {frames} timed frames x {args.repeat} repeats per backend"
@@ -258,7 +257,7 @@ def main(argv: list[str] | None = None) -> int:
     plot(entries, groups, out / "recommend.png", f"{scene.name}: n={scene.n}")
     (out / "recommend.md").write_text(markdown(lines, entries, groups, notes))
     write_json(out / "meta.json", run_metadata(command_line("recommend", argv), {
-        "scene": fixed, "traits": vars(traits), "frames": args.frames, "repeats": args.repeat,
+        "scene": fixed, "traits": vars(traits), "frames": frames, "repeats": args.repeat,
         "unavailable": missing, "not_tried": skipped,
         "ranking": [[{"backend": e.backend, "params": e.trial.params, "median_ms": e.trial.median_ms} for e in g]
                     for g in groups]}))

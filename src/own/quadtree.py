@@ -163,8 +163,8 @@ class Quadtree(BroadPhase):
     """
 
     name = "own.quadtree"
-    # Capacity 32: over the scene families of docs/TUNING.md it was within 4 % of each scene's
-    # best capacity on average and 18 % at worst (capacity 8: 12 % and 43 %).
+    # Capacity 32: in two runs of the tuning study over the scene families (docs/TUNING.md),
+    # 16 and 32 came within about 8 % of each scene's best capacity on average; 8 was 12-22 % off.
     defaults = {"capacity": 32, "max_depth": 16}
 
     def __init__(self, **params):
