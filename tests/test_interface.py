@@ -26,7 +26,7 @@ def test_unknown_backend_is_a_clear_error():
 
 
 def test_unknown_parameter_is_a_clear_error():
-    with pytest.raises(ValueError, match="unknown parameter.*cells.*known: cell, p"):
+    with pytest.raises(ValueError, match="unknown parameter.*cells.*known: cell, coherent, p"):
         engines.create("own.grid", cells=3)
 
 
@@ -83,7 +83,7 @@ def test_update_checks_the_object_count_and_values(name):
 
 
 def test_describe_names_the_parameters():
-    assert engines.create("own.grid", p=16).describe() == "own.grid(cell=None, p=16)"
+    assert engines.create("own.grid", p=16).describe() == "own.grid(cell=None, coherent=True, p=16)"
     assert engines.create("own.brute").describe() == "own.brute"
 
 
