@@ -44,6 +44,14 @@ def run_cli(prog: str, main, argv: list[str] | None) -> int:
         return 130
 
 
+def matched_backends(patterns: str) -> list[str]:
+    """The backends the comma-separated globs name; an unknown pattern is a CliError."""
+    try:
+        return engines.match(patterns)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+
+
 def warn_unavailable(chosen: list[str]) -> dict[str, str]:
     """Say loudly which chosen backends cannot run here (they are left out); name -> reason."""
     missing = {n: r for n, r in engines.unavailable().items() if n in chosen}

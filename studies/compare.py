@@ -18,8 +18,8 @@ from tqdm import tqdm
 import engines
 from scenes.motion import simulate
 
-from .cli import (CliError, Parser, add_scene_options, command_line, prepare_out, run_cli, run_metadata,
-                  scene_from_args, warn_unavailable, write_json)
+from .cli import (CliError, Parser, add_scene_options, command_line, matched_backends, prepare_out,
+                  run_cli, run_metadata, scene_from_args, warn_unavailable, write_json)
 from .harness import COLUMNS, Job, run_isolated, scene_columns
 from .summary import add_speedup, format_table, plot_error_vs_time, summarise
 
@@ -64,10 +64,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     if args.list:
         return list_backends()
-    try:
-        chosen = engines.match(args.backends)
-    except ValueError as exc:
-        raise CliError(str(exc)) from None
+    chosen = matched_backends(args.backends)
     scene = scene_from_args(args)
     out = prepare_out(args.out, "compare")
     unavailable = warn_unavailable(chosen)

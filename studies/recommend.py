@@ -24,8 +24,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import engines  # noqa: E402
 from scenes.motion import simulate  # noqa: E402
 
-from .cli import (CliError, Parser, add_scene_options, command_line, prepare_out, run_cli,  # noqa: E402
-                  run_metadata, scene_from_args, warn_unavailable, write_json)
+from .cli import (CliError, Parser, add_scene_options, command_line, matched_backends,  # noqa: E402
+                  prepare_out, run_cli, run_metadata, scene_from_args,
+                  warn_unavailable, write_json)
 from .harness import COLUMNS, scene_columns  # noqa: E402
 from .knobs import KNOBS  # noqa: E402
 from .summary import FAMILY_COLOURS  # noqa: E402
@@ -188,10 +189,7 @@ def parse(argv):
 
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
-    try:
-        chosen = engines.match(args.backends)
-    except ValueError as exc:
-        raise CliError(str(exc)) from None
+    chosen = matched_backends(args.backends)
     scene = scene_from_args(args)
     out = prepare_out(args.out, "recommend")
     missing = warn_unavailable(chosen)

@@ -25,12 +25,11 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-import engines  # noqa: E402
 from scenes.generate import at_essay_density  # noqa: E402
 from scenes.motion import simulate  # noqa: E402
 
-from .cli import (CliError, Parser, command_line, prepare_out, run_cli, run_metadata,  # noqa: E402
-                  warn_unavailable, write_json)
+from .cli import (CliError, Parser, command_line, matched_backends, prepare_out,  # noqa: E402
+                  run_cli, run_metadata, warn_unavailable, write_json)
 from .harness import COLUMNS, Job, run_isolated, scene_columns  # noqa: E402
 
 DISTS = ("uniform", "clusters")
@@ -38,7 +37,6 @@ DISTS = ("uniform", "clusters")
 COMPILE_PROBE = """
 import time
 start = time.perf_counter()
-import engines
 from scenes import generate
 scene = generate("uniform", 256, seed=0)
 for name in ("own.sap", "own.sap_incremental", "own.grid", "own.quadtree"):
@@ -110,10 +108,7 @@ def parse(argv):
 
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
-    try:
-        chosen = engines.match(args.backends)
-    except ValueError as exc:
-        raise CliError(str(exc)) from None
+    chosen = matched_backends(args.backends)
     out = prepare_out(args.out, "scale")
     missing = warn_unavailable(chosen)
     start = time.perf_counter()

@@ -27,14 +27,13 @@ import pandas as pd  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-import engines  # noqa: E402
 from scenes.generate import at_essay_density  # noqa: E402
 from scenes.io import load_scene, save_scene  # noqa: E402
 from scenes.motion import simulate  # noqa: E402
 from scenes.stress import STRESS_SCENES  # noqa: E402
 
-from .cli import (CliError, Parser, command_line, prepare_out, run_cli, run_metadata,  # noqa: E402
-                  warn_unavailable, write_json)
+from .cli import (CliError, Parser, command_line, matched_backends, prepare_out,  # noqa: E402
+                  run_cli, run_metadata, warn_unavailable, write_json)
 from .harness import COLUMNS, Job, run_isolated, scene_columns  # noqa: E402
 
 OUTCOMES = ["exact", "extra candidates", "missed", "invalid output", "error", "crashed", "timed out", "skipped"]
@@ -228,10 +227,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     if args.report_only:
         return report_only(args)
-    try:
-        backends = engines.match(args.backends)
-    except ValueError as exc:
-        raise CliError(str(exc)) from None
+    backends = matched_backends(args.backends)
     patterns = [s.strip() for s in args.scenes.split(",") if s.strip()]
     names = [n for n in STRESS_SCENES if any(fnmatch.fnmatch(n, p) for p in patterns)]
     if not names and not args.scene:

@@ -8,7 +8,7 @@ and whether it missed any pair.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
@@ -29,7 +29,7 @@ class Trial:
     high_ms: float = float("nan")
     missed: int = 0  # truly overlapping pairs, plus overlapping boxes for "boxes" backends
     described: str = ""  # the backend with its parameters, e.g. "own.grid(cell=20.0, p=None)"
-    stats: list[dict] = field(default_factory=list)
+    last_stats: str = "{}"  # the backend's work counters on the last frame (JSON)
 
     @property
     def ok(self) -> bool:
@@ -58,7 +58,7 @@ def run_trial(traj: Trajectory, backend: str, params: dict[str, Any] | None = No
     trial.low_ms, trial.high_ms = min(medians), max(medians)
     trial.missed = int(sum(r["missed"] + (r["box_missed"] or 0) for r in rows))
     trial.described = rows[0]["params"]
-    trial.stats = [r["stats"] for r in rows[-1:]]
+    trial.last_stats = rows[-1]["stats"]
     return trial
 
 

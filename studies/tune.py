@@ -24,12 +24,12 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-import engines  # noqa: E402
 from scenes import generate  # noqa: E402
 from scenes.motion import simulate  # noqa: E402
 
-from .cli import (CliError, Parser, add_scene_options, command_line, prepare_out, run_cli,  # noqa: E402
-                  run_metadata, scene_from_args, warn_unavailable, write_json)
+from .cli import (CliError, Parser, add_scene_options, command_line, matched_backends,  # noqa: E402
+                  prepare_out, run_cli, run_metadata, scene_from_args,
+                  warn_unavailable, write_json)
 from .harness import scene_columns  # noqa: E402
 from .knobs import GRID_CELL_FACTORS, KNOBS, tunable  # noqa: E402
 from .trials import Trial, warm_up  # noqa: E402
@@ -174,12 +174,11 @@ def families_report(out: Path, report_dir: Path, args, record: Recorder) -> None
             traj = simulate(generate(n=n, seed=args.seed, speed=args.speed, **kwargs), args.frames + 1)
             print(f"{family}, n={n}:", flush=True)
             for t in run_tune(traj, OWN, args, record):
-                effective = t.default.stats[-1] if t.default.stats else "{}"
                 rows.append({"family": family, "n": n, "backend": t.backend,
                              "best": ", ".join(f"{k}={v}" for k, v in t.params.items()),
                              "best_ms": t.best.median_ms if t.best else float("nan"),
                              "default_ms": t.default.median_ms, "loss": t.loss,
-                             "within_noise": t.default_within_noise, "default_stats": effective})
+                             "within_noise": t.default_within_noise, "default_stats": t.default.last_stats})
                 for sweep in t.sweeps:
                     ok = [(v, tr.median_ms) for v, tr in sweep.points if tr.ok and not tr.missed]
                     if not ok:
@@ -317,10 +316,7 @@ def main(argv: list[str] | None = None) -> int:
             families_report(out, report_dir, args, record)
             print(f"\nwrote {out / 'tune.csv'}, {out / 'families.csv'}, {report_dir / 'TUNING.md'}")
             return 0
-        try:
-            chosen = tunable(engines.match(args.backends))
-        except ValueError as exc:
-            raise CliError(str(exc)) from None
+        chosen = tunable(matched_backends(args.backends))
         if not chosen:
             raise CliError(f"none of {args.backends!r} has parameters to tune; tunable: {', '.join(KNOBS)}")
         missing = warn_unavailable(chosen)

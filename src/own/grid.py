@@ -68,16 +68,16 @@ def centre_extents(positions):
 
 
 @nb.njit(cache=True)
-def grid_layout(positions, p, cell, max_cells, layout):
-    """Fill `layout` for these centres unless the current one still fits; True if rebuilt.
+def grid_layout(extent, n, p, cell, max_cells, layout):
+    """Fill `layout` for n centres spanning `extent` (centre_extents) unless the current one still
+    fits; True if rebuilt.
 
     It still fits while every centre is inside it and the centres span at least half of it on
     each axis. p > 0 gives p x p cells over the centres' extent; otherwise square cells of size
     `cell` (plus the rounding margin, so a diameter of `cell` fits), enlarged until there are at
     most `max_cells`.
     """
-    n = positions.shape[0]
-    x0, y0, x1, y1 = centre_extents(positions)
+    x0, y0, x1, y1 = extent
     sx, sy = x1 - x0, y1 - y0
     nx, ny = layout[NX], layout[NY]
     if nx > 0:
@@ -106,10 +106,10 @@ def grid_layout(positions, p, cell, max_cells, layout):
 
 
 @nb.njit(cache=True)
-def small_limit(positions, layout):
+def small_limit(extent, layout):
     """Largest diameter that counts as small: a cell less a margin covering the rounding of the
     cell index and of the box bounds (a few ulps of the largest coordinate involved)."""
-    x0, y0, x1, y1 = centre_extents(positions)
+    x0, y0, x1, y1 = extent
     far = max(abs(x0), abs(x1), abs(y0), abs(y1), abs(layout[OX]), abs(layout[OY]),
               abs(layout[OX] + layout[NX] * layout[CW]), abs(layout[OY] + layout[NY] * layout[CH]))
     c = min(layout[CW], layout[CH])
@@ -230,8 +230,9 @@ def grid_pairs(ids, box, skey, start, layout, limit, buf):
 def grid_update(positions, radii, order, last_key, p, cell, max_cells, layout):
     """One call per frame (each compiled call from Python costs microseconds): the layout, the
     small-object limit and the build. Returns (relayout, limit, *grid_build's results)."""
-    relayout = grid_layout(positions, p, cell, max_cells, layout)
-    limit = small_limit(positions, layout)
+    extent = centre_extents(positions)
+    relayout = grid_layout(extent, positions.shape[0], p, cell, max_cells, layout)
+    limit = small_limit(extent, layout)
     if relayout:
         last_key = np.full(positions.shape[0], -1, dtype=np.int64)  # cells of another layout
     ids, box, skey, start, moved = grid_build(positions, radii, order, last_key, layout, limit)
