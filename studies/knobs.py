@@ -48,6 +48,7 @@ KNOBS: dict[str, list[Knob]] = {
                       "requested cell size")],
     "own.quadtree": [Knob("capacity", _fixed([1, 2, 4, 8, 16, 32, 64]), "capacity (objects per leaf)"),
                      Knob("max_depth", _fixed([4, 6, 8, 10, 12, 16, 24]), "maximum depth")],
+    "own.bvh": [Knob("leaf_size", _fixed([1, 2, 4, 8, 16]), "objects per leaf")],
     "own.sap": [Knob("axis", AXES, "sweep axis")],
     "own.sap_incremental": [Knob("axis", AXES, "sweep axis")],
     "chipmunk.hash": [Knob("dim", _sizes(_mean_diameter, HASH_DIM_FACTORS), "hash cell size dim"),

@@ -11,7 +11,7 @@ from engines.reference import BRUTE_FORCE_LIMIT, box_pairs
 from own.brute import brute_pairs
 from scenes import generate
 
-OWN = ["own.brute", "own.sap", "own.grid", "own.quadtree", "essay.sap", "essay.grid", "essay.quadtree"]
+OWN = ["own.brute", "own.sap", "own.grid", "own.quadtree", "own.bvh", "essay.sap", "essay.grid", "essay.quadtree"]
 
 
 def test_registry_lists_own_backends_as_available():
@@ -38,6 +38,7 @@ def test_unknown_parameter_is_a_clear_error():
         ("own.grid", {"cell": -1.0}, "cell must be a positive"),
         ("own.grid", {"p": 4, "cell": 1.0}, "not both"),
         ("own.quadtree", {"capacity": 0}, "capacity must be an integer >= 1"),
+        ("own.bvh", {"leaf_size": 0}, "leaf_size must be an integer >= 1"),
         ("own.sap", {"axis": "z"}, "axis must be one of"),
         ("essay.quadtree", {"capacity": "5"}, "capacity must be an integer"),
     ],

@@ -29,6 +29,8 @@ EXACT = [
     ("own.quadtree", {}),
     ("own.quadtree", {"capacity": 1}),
     ("own.quadtree", {"capacity": 2, "max_depth": 3}),
+    ("own.bvh", {}),
+    ("own.bvh", {"leaf_size": 1}),
 ]
 IDS = [name + "".join(f"-{k}={v}" for k, v in p.items()) for name, p in EXACT]
 

@@ -18,6 +18,7 @@ BACKENDS: dict[str, str] = {
     "own.sap_incremental": "own.sap:IncrementalSweepAndPrune",
     "own.grid": "own.grid:UniformGrid",
     "own.quadtree": "own.quadtree:Quadtree",
+    "own.bvh": "own.bvh:LinearBvh",
     "own.grid_swept": "engines.swept:SweptGrid",
     "own.sap_swept": "engines.swept:SweptSap",
     "essay.sap": "own.essay.sap:EssaySweepAndPrune",

@@ -43,14 +43,10 @@ LX, HX, LY, HY = range(4)
 
 
 @nb.njit(cache=True, inline="always")
-def cell_of(v: float, origin: float, inv: float, m: int) -> int:
-    """Cell index of coordinate v along one axis, clamped to 0..m-1 (monotone in v)."""
-    t = (v - origin) * inv
-    if t < 0.0:
-        return 0
-    if t >= m:
-        return m - 1
-    return int(t)
+def cell_of(v: float, origin: float, inv: float, last: float) -> int:
+    """Cell index of coordinate v along one axis, clamped to 0..last (monotone in v). Clamping
+    in floating point keeps it branch-free: branches here cost 2x in the build."""
+    return int(min(max((v - origin) * inv, 0.0), last))
 
 
 @nb.njit(cache=True)
@@ -117,48 +113,52 @@ def small_limit(extent, layout):
 
 
 @nb.njit(cache=True)
-def grid_build(positions, radii, order, last_key, layout, limit):
-    """Counting sort of objects into cells (large ones into bucket nx * ny), stable in `order`.
+def grid_build(positions, radii, order, last_key, layout, limit, start, key, xyr, ids, box, skey):
+    """Counting sort of objects into cells (large ones into the last bucket), stable in `order`.
 
-    `last_key` holds last frame's cell per slot of `order` (or -1s).
-    Returns (slot ids, slot boxes (n, 4), slot keys, cell starts, objects that changed cell).
-    Cell c holds slots start[c]:start[c + 1]; the large bucket is start[nx * ny]:n.
+    Keys live in a padded key space: rows of nx + 2 cells (an empty column on each side) and one
+    empty row on top, so the pair search needs no edge cases (each costs a branch per object).
+    Cell (cx, cy) has key cy * (nx + 2) + cx + 1; the large bucket has key (ny + 1) * (nx + 2).
+    `last_key` holds last frame's key per slot of `order` (or -1s). Fills slot ids, slot boxes
+    (n, 4) and slot keys; `key` and `xyr` are scratch. Every array is the caller's, reused from
+    frame to frame: fresh ones would cost a page fault per 4 KiB, at large n more than the sort.
+    Returns (bucket starts, objects that changed cell): bucket k holds slots start[k]:start[k + 1];
+    `start` is reused when it has the size of this layout's key space.
     """
     n = positions.shape[0]
-    nx, ny = int(layout[NX]), int(layout[NY])
     ox, oy, inv_x, inv_y = layout[OX], layout[OY], 1.0 / layout[CW], 1.0 / layout[CH]
-    ncells = nx * ny
+    w = int(layout[NX]) + 2
+    last_x, last_y = layout[NX] - 1.0, layout[NY] - 1.0
+    large = (int(layout[NY]) + 1) * w
+    if start.shape[0] == large + 2:
+        start[:] = 0
+    else:
+        start = np.zeros(large + 2, dtype=np.int64)
     # One pass reads the objects in `order` (the only scattered reads) into sequential arrays;
     # the scatter then reads those and, when `order` is last frame's, writes almost in place.
-    key = np.empty(n, dtype=np.int64)
-    xyr = np.empty((n, 3))
-    moved = 0
-    start = np.zeros(ncells + 2, dtype=np.int64)
     for k in range(n):
         i = order[k]
         x, y, r = positions[i, 0], positions[i, 1], radii[i]
         xyr[k, 0], xyr[k, 1], xyr[k, 2] = x, y, r
-        c = ncells
-        if 2.0 * r <= limit:
-            c = cell_of(y, oy, inv_y, ny) * nx + cell_of(x, ox, inv_x, nx)
-        key[k] = c
-        start[c] += 1
-        if c != last_key[k]:
-            moved += 1
-    for c in range(1, ncells + 1):  # start[c] = end of cell c
-        start[c] += start[c - 1]
-    start[ncells + 1] = n
-    ids = np.empty(n, dtype=np.int64)
-    box = np.empty((n, 4))
-    skey = np.empty(n, dtype=np.int64)
-    for k in range(n - 1, -1, -1):  # backwards, filling each cell from its end: stable
+        c = cell_of(y, oy, inv_y, last_y) * w + cell_of(x, ox, inv_x, last_x) + 1
+        key[k] = c if 2.0 * r <= limit else large
+    moved = 0
+    for k in range(n):
         c = key[k]
-        start[c] -= 1
-        s = start[c]
+        start[c] += 1
+        moved += c != last_key[k]
+    total = 0
+    for c in range(large + 2):  # start[c] = end of bucket c (a running sum: no reload per cell)
+        total += start[c]
+        start[c] = total
+    for k in range(n - 1, -1, -1):  # backwards, filling each bucket from its end: stable
+        c = key[k]
+        s = start[c] - 1
+        start[c] = s
         ids[s], skey[s] = order[k], c
         x, y, r = xyr[k, 0], xyr[k, 1], xyr[k, 2]
         box[s, LX], box[s, HX], box[s, LY], box[s, HY] = x - r, x + r, y - r, y + r
-    return ids, box, skey, start, moved  # now start[c] = first slot of cell c
+    return start, moved  # now start[c] = first slot of bucket c
 
 
 @nb.njit(cache=True, inline="always")
@@ -177,25 +177,21 @@ def grid_pairs(ids, box, skey, start, layout, limit, buf):
     """Box-overlap pairs into buf, each once; returns (pairs found, pair tests)."""
     n = ids.shape[0]
     nx, ny = int(layout[NX]), int(layout[NY])
-    ncells = nx * ny
+    w = nx + 2
+    large = (ny + 1) * w
+    first_large = start[large]
     count = 0
     tests = 0
-    # Small against small: own cell (later slots) and east, then the row above (NW, N, NE),
-    # which are contiguous slots.
-    for cy in range(ny):
-        row = cy * nx
-        for a in range(start[row], start[row + nx]):
-            c = skey[a]
-            cx = c - row
-            e = start[c + 2] if cx + 1 < nx else start[c + 1]
-            tests += e - a - 1
-            count = _scan(box, ids, a, a + 1, e, buf, count)
-            if cy + 1 < ny:
-                s = start[c + nx - 1] if cx > 0 else start[c + nx]
-                e = start[c + nx + 2] if cx + 1 < nx else start[c + nx + 1]
-                tests += e - s
-                count = _scan(box, ids, a, s, e, buf, count)
-    first_large = start[ncells]
+    # Small against small: later slots of the own cell and the east cell, then the row above
+    # (NW, N, NE), which are contiguous slots. Thanks to the padding, no edge cases.
+    for a in range(first_large):
+        c = skey[a]
+        e = start[c + 2]
+        tests += e - a - 1
+        count = _scan(box, ids, a, a + 1, e, buf, count)
+        s, e = start[c + w - 1], start[c + w + 2]
+        tests += e - s
+        count = _scan(box, ids, a, s, e, buf, count)
     if first_large == n:
         return count, tests
     # Large against small: the cells their box grown by a small radius covers, plus one cell on
@@ -203,12 +199,12 @@ def grid_pairs(ids, box, skey, start, layout, limit, buf):
     ox, oy, inv_x, inv_y = layout[OX], layout[OY], 1.0 / layout[CW], 1.0 / layout[CH]
     reach = 0.5 * max(limit, 0.0)
     for a in range(first_large, n):
-        cx0 = max(cell_of(box[a, LX] - reach, ox, inv_x, nx) - 1, 0)
-        cx1 = min(cell_of(box[a, HX] + reach, ox, inv_x, nx) + 1, nx - 1)
-        cy0 = max(cell_of(box[a, LY] - reach, oy, inv_y, ny) - 1, 0)
-        cy1 = min(cell_of(box[a, HY] + reach, oy, inv_y, ny) + 1, ny - 1)
+        cx0 = max(cell_of(box[a, LX] - reach, ox, inv_x, nx - 1.0) - 1, 0)
+        cx1 = min(cell_of(box[a, HX] + reach, ox, inv_x, nx - 1.0) + 1, nx - 1)
+        cy0 = max(cell_of(box[a, LY] - reach, oy, inv_y, ny - 1.0) - 1, 0)
+        cy1 = min(cell_of(box[a, HY] + reach, oy, inv_y, ny - 1.0) + 1, ny - 1)
         for cy in range(cy0, cy1 + 1):
-            s, e = start[cy * nx + cx0], start[cy * nx + cx1 + 1]
+            s, e = start[cy * w + cx0 + 1], start[cy * w + cx1 + 2]
             tests += e - s
             count = _scan(box, ids, a, s, e, buf, count)
     # Large against large: sweep along x.
@@ -227,16 +223,16 @@ def grid_pairs(ids, box, skey, start, layout, limit, buf):
 
 
 @nb.njit(cache=True)
-def grid_update(positions, radii, order, last_key, p, cell, max_cells, layout):
+def grid_update(positions, radii, order, last_key, p, cell, max_cells, layout, start, key, xyr, ids, box, skey):
     """One call per frame (each compiled call from Python costs microseconds): the layout, the
-    small-object limit and the build. Returns (relayout, limit, *grid_build's results)."""
+    small-object limit and the build. Returns (relayout, limit, bucket starts, objects moved)."""
     extent = centre_extents(positions)
     relayout = grid_layout(extent, positions.shape[0], p, cell, max_cells, layout)
     limit = small_limit(extent, layout)
     if relayout:
         last_key = np.full(positions.shape[0], -1, dtype=np.int64)  # cells of another layout
-    ids, box, skey, start, moved = grid_build(positions, radii, order, last_key, layout, limit)
-    return relayout, limit, ids, box, skey, start, moved
+    start, moved = grid_build(positions, radii, order, last_key, layout, limit, start, key, xyr, ids, box, skey)
+    return relayout, limit, start, moved
 
 
 def default_cell(radii: np.ndarray) -> float:
@@ -274,8 +270,15 @@ class UniformGrid(BroadPhase):
         self._p = int(self.params["p"] or 0)
         self._max_cells = MAX_CELLS_PER_OBJECT * self.n + 16
         self._layout = np.zeros(6)
-        self._ids = np.arange(self.n, dtype=np.int64)
-        self._key = np.full(self.n, -1, dtype=np.int64)
+        n = self.n
+        self._ids = np.arange(n, dtype=np.int64)
+        self._key = np.full(n, -1, dtype=np.int64)
+        self._box = np.empty((n, 4))
+        # Work arrays kept from frame to frame; slots are double-buffered (the build reads last
+        # frame's order while it writes this frame's).
+        self._spare = (np.empty(n, dtype=np.int64), np.empty((n, 4)), np.empty(n, dtype=np.int64))
+        self._scratch = (np.empty(n, dtype=np.int64), np.empty((n, 3)))
+        self._start = np.zeros(0, dtype=np.int64)
         self._collect = PairCollector()
         self._update(positions)
 
@@ -286,12 +289,20 @@ class UniformGrid(BroadPhase):
         else:  # input order; last frame's cells looked up per object
             order, last_key = np.arange(self.n, dtype=np.int64), np.empty(self.n, dtype=np.int64)
             last_key[self._ids] = self._key
-        relayout, self._limit, self._ids, self._box, self._key, self._start, moved = grid_update(
-            positions, self.radii, order, last_key, self._p, self._cell, self._max_cells, self._layout
+        ids, box, key = self._spare
+        relayout, self._limit, self._start, moved = grid_update(
+            positions, self.radii, order, last_key, self._p, self._cell, self._max_cells, self._layout,
+            self._start, *self._scratch, ids, box, key,
         )
+        self._spare = (self._ids, self._box, self._key)
+        self._ids, self._box, self._key = ids, box, key
         ncells = int(self._layout[NX] * self._layout[NY])
-        self._stats = {"cells": ncells, "cell": float(self._layout[CW]), "large": self.n - int(self._start[ncells]), "moved": moved,
-                       "relayout": int(relayout)}
+        self._stats = {"cells": ncells, "cell": float(self._layout[CW]), "large": self.n - int(self._start[self._large_key()]),
+                       "moved": moved, "relayout": int(relayout)}
+
+    def _large_key(self) -> int:
+        """Key of the large bucket in grid_build's padded key space."""
+        return int((self._layout[NY] + 1) * (self._layout[NX] + 2))
 
     def _pairs(self):
         out, (tests,) = self._collect(grid_pairs, self._ids, self._box, self._key, self._start, self._layout, self._limit)
@@ -307,16 +318,16 @@ class UniformGrid(BroadPhase):
 
     def validate(self):
         nx, ny = int(self._layout[NX]), int(self._layout[NY])
-        ncells = nx * ny
+        large = self._large_key()
         start, ids, key = self._start, self._ids, self._key
         assert np.array_equal(np.sort(ids), np.arange(self.n)), "slot ids are not a permutation"
-        assert start[0] == 0 and start[-1] == self.n and (np.diff(start) >= 0).all(), "cell starts are not a prefix sum"
-        assert np.array_equal(key, np.repeat(np.arange(ncells + 1), np.diff(start))), "slots are not sorted by cell"
+        assert start[0] == 0 and start[-1] == self.n and (np.diff(start) >= 0).all(), "bucket starts are not a prefix sum"
+        assert np.array_equal(key, np.repeat(np.arange(large + 1), np.diff(start))), "slots are not sorted by key"
         small = 2.0 * self.radii[ids] <= self._limit
-        assert np.array_equal(small, key < ncells), "an object is in the wrong bucket for its size"
+        assert np.array_equal(small, key < large), "an object is in the wrong bucket for its size"
         assert self._limit < min(self._layout[CW], self._layout[CH]), "small objects could span two cells"
         ox, oy, cw, ch = self._layout[[OX, OY, CW, CH]]
         for s in np.flatnonzero(small):
             x, y = self._positions[ids[s]]
-            cx, cy = cell_of(x, ox, 1.0 / cw, nx), cell_of(y, oy, 1.0 / ch, ny)
-            assert key[s] == cy * nx + cx, f"object {ids[s]} is not in the cell holding its centre"
+            cx, cy = cell_of(x, ox, 1.0 / cw, nx - 1.0), cell_of(y, oy, 1.0 / ch, ny - 1.0)
+            assert key[s] == cy * (nx + 2) + cx + 1, f"object {ids[s]} is not in the cell holding its centre"

@@ -8,11 +8,14 @@ import numpy as np
 from engines.base import BroadPhase
 
 from .common import PairCollector, emit
+from .radix import radix_argsort, sortable_bits
 
 AXES = ("x", "y", "auto")
 # An insertion-sort repair that needs more swaps than this many per object gives up and sorts
 # from scratch: coherence only pays while objects move little between frames.
 MAX_SWAPS_PER_OBJECT = 8
+# Objects tested per vectorised chunk of a sweep window (64 measured best of 8..256 at n = 2^17).
+SWEEP_CHUNK = 64
 
 
 @nb.njit(cache=True)
@@ -66,9 +69,8 @@ def sap_prepare(positions, radii, axis_mode, order, incremental):
             keys[a] = positions[order[a], axis] - radii[order[a]]
         swaps = _insertion_sort(order[:n], keys, MAX_SWAPS_PER_OBJECT * n + 64)
     if swaps < 0:
-        keys = positions[:, axis] - radii
         order = np.empty(n + 1, dtype=np.int64)
-        order[:n] = np.argsort(keys)
+        order[:n] = radix_argsort(sortable_bits(positions[:, axis] - radii))
     order[n] = axis  # remember the axis the order belongs to
     s_lo, s_hi, o_lo, o_hi = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     for a in range(n):
@@ -80,22 +82,55 @@ def sap_prepare(positions, radii, axis_mode, order, incremental):
     return axis, order, s_lo, s_hi, o_lo, o_hi, swaps
 
 
+@nb.njit(cache=True, inline="always")
+def _window_end(s_lo, a, top, prev_end, prev_top):
+    """First slot after a whose lower bound is past `top` (s_lo is sorted): onwards from the
+    previous window's end while the upper bounds grow (always, for equal radii), else bisected."""
+    n = s_lo.shape[0]
+    if top >= prev_top:
+        e = max(prev_end, a + 1)
+        while e < n and s_lo[e] <= top:
+            e += 1
+        return e
+    lo, hi = a + 1, max(prev_end, a + 1)
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if s_lo[mid] <= top:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
 @nb.njit(cache=True)
 def sap_sweep(order, s_lo, s_hi, o_lo, o_hi, buf):
-    """Box-overlap pairs into buf; returns (pairs found, pairs overlapping on the sweep axis)."""
+    """Box-overlap pairs into buf; returns (pairs found, pairs overlapping on the sweep axis).
+
+    Each object's window (the later objects overlapping it on the sweep axis) is found first,
+    then tested on the other axis in chunks: a chunk's hits are counted by a loop over slices,
+    which the compiler vectorises (indices from zero cannot wrap around), and only a chunk with
+    a hit is walked again to emit its pairs. Measured 2.5x faster than a test-and-emit loop.
+    """
     n = s_lo.shape[0]
     count = 0
     axis_hits = 0
+    end, prev_top = 0, -np.inf
     for a in range(n):
         top, lo_a, hi_a, i = s_hi[a], o_lo[a], o_hi[a], order[a]
-        for b in range(a + 1, n):
-            # Sorted by lower bound: once one starts past our upper bound, all later ones do.
-            if s_lo[b] > top:
-                break
-            axis_hits += 1
-            if max(lo_a, o_lo[b]) <= min(hi_a, o_hi[b]):
-                emit(buf, count, i, order[b])
-                count += 1
+        end = _window_end(s_lo, a, top, end, prev_top)
+        prev_top = top
+        axis_hits += end - a - 1
+        for c0 in range(a + 1, end, SWEEP_CHUNK):
+            lo_b, hi_b = o_lo[c0:min(c0 + SWEEP_CHUNK, end)], o_hi[c0:min(c0 + SWEEP_CHUNK, end)]
+            hits = 0
+            for t in range(lo_b.shape[0]):
+                hits += (lo_b[t] <= hi_a) & (hi_b[t] >= lo_a)
+            if hits:
+                ids_b = order[c0:c0 + lo_b.shape[0]]
+                for t in range(lo_b.shape[0]):
+                    # Branch-free: every pair is written at row `count`, which only a hit keeps.
+                    emit(buf, count, i, ids_b[t])
+                    count += (lo_b[t] <= hi_a) & (hi_b[t] >= lo_a)
     return count, axis_hits
 
 
