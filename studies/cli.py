@@ -52,6 +52,18 @@ def matched_backends(patterns: str) -> list[str]:
         raise CliError(str(exc)) from None
 
 
+def check_trial_options(args: argparse.Namespace) -> None:
+    """--quick (3 frames, 1 repeat), then --frames and --repeat at least 1 and --budget and
+    --timeout positive: the options every timing study shares."""
+    if args.quick:
+        args.frames, args.repeat = 3, 1
+    for name in ("frames", "repeat"):
+        if getattr(args, name) < 1:
+            raise CliError(f"--{name} must be at least 1")
+    if not args.budget > 0 or not args.timeout > 0:
+        raise CliError("--budget and --timeout must be positive")
+
+
 def warn_unavailable(chosen: list[str]) -> dict[str, str]:
     """Say loudly which chosen backends cannot run here (they are left out); name -> reason."""
     missing = {n: r for n, r in engines.unavailable().items() if n in chosen}

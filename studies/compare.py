@@ -18,7 +18,7 @@ from tqdm import tqdm
 import engines
 from scenes.motion import simulate
 
-from .cli import (CliError, Parser, add_scene_options, command_line, matched_backends, prepare_out,
+from .cli import (Parser, add_scene_options, check_trial_options, command_line, matched_backends, prepare_out,
                   run_cli, run_metadata, scene_from_args, warn_unavailable, write_json)
 from .harness import COLUMNS, Job, run_isolated, scene_columns
 from .summary import add_speedup, format_table, plot_error_vs_time, summarise
@@ -38,13 +38,7 @@ def parse(argv: list[str] | None):
     p.add_argument("--list", action="store_true", help="list the backends, their availability and exit")
     p.add_argument("--quick", action="store_true", help="a smoke run: 3 frames, 1 repeat")
     args = p.parse_args(argv)
-    if args.quick:
-        args.frames, args.repeat = 3, 1
-    for name in ("frames", "repeat"):
-        if getattr(args, name) < 1:
-            raise CliError(f"--{name} must be at least 1")
-    if not args.budget > 0 or not args.timeout > 0:
-        raise CliError("--budget and --timeout must be positive")
+    check_trial_options(args)
     return args
 
 

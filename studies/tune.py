@@ -27,7 +27,7 @@ import pandas as pd  # noqa: E402
 from scenes import generate  # noqa: E402
 from scenes.motion import simulate  # noqa: E402
 
-from .cli import (CliError, Parser, add_scene_options, command_line, matched_backends,  # noqa: E402
+from .cli import (CliError, Parser, add_scene_options, check_trial_options, command_line, matched_backends,  # noqa: E402
                   prepare_out, run_cli, run_metadata, scene_from_args,
                   warn_unavailable, write_json)
 from .harness import scene_columns  # noqa: E402
@@ -291,12 +291,7 @@ def parse(argv):
     p.add_argument("--out", metavar="DIR", help="output folder (default results/tune-<date>-<time>)")
     p.add_argument("--report-dir", metavar="DIR", help="where --families writes TUNING.md (default docs/)")
     args = p.parse_args(argv)
-    if args.quick:
-        args.frames, args.repeat = 3, 1
-    if args.frames < 1 or args.repeat < 1:
-        raise CliError("--frames and --repeat must be at least 1")
-    if not args.budget > 0 or not args.timeout > 0:
-        raise CliError("--budget and --timeout must be positive")
+    check_trial_options(args)
     try:
         args.sizes = [int(v) for v in args.sizes.split(",")] if args.sizes else None
     except ValueError:

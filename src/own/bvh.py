@@ -18,7 +18,7 @@ import numpy as np
 
 from engines.base import BroadPhase
 
-from .common import PairCollector, emit
+from .common import PairCollector, centre_extents, scan_boxes
 from .radix import radix_argsort
 
 MORTON_BITS = 16  # per axis: 2^16 lattice steps over the centres' extent
@@ -45,8 +45,7 @@ def morton_codes(positions: np.ndarray) -> np.ndarray:
     codes = np.zeros(n, dtype=np.uint64)
     if n == 0:
         return codes
-    x0, x1 = positions[:, 0].min(), positions[:, 0].max()
-    y0, y1 = positions[:, 1].min(), positions[:, 1].max()
+    x0, y0, x1, y1 = centre_extents(positions)
     top = float((1 << MORTON_BITS) - 1)
     sx = top / (x1 - x0) if x1 > x0 else 0.0
     sy = top / (y1 - y0) if y1 > y0 else 0.0
@@ -126,11 +125,7 @@ def bvh_build(positions, radii, leaf_size):
 def _cross(order, box, a0, a1, b0, b1, buf, count):
     """Pairs between sorted objects a0..a1 and b0..b1 (b0 > a1, or the same range once)."""
     for a in range(a0, a1 + 1):
-        ax0, ax1, ay0, ay1 = box[a, 0], box[a, 1], box[a, 2], box[a, 3]
-        for b in range(max(b0, a + 1), b1 + 1):
-            if (max(ax0, box[b, 0]) <= min(ax1, box[b, 1])) & (max(ay0, box[b, 2]) <= min(ay1, box[b, 3])):
-                emit(buf, count, order[a], order[b])
-                count += 1
+        count = scan_boxes(box, order, a, max(b0, a + 1), b1 + 1, buf, count)
     return count
 
 

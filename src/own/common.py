@@ -68,6 +68,32 @@ def emit(buf: np.ndarray, count: int, i: int, j: int) -> None:
             buf[count, 1] = i
 
 
+@nb.njit(cache=True)
+def centre_extents(positions):
+    """(xmin, ymin, xmax, ymax) of the centres; (0, 0, 0, 0) for an empty scene."""
+    if positions.shape[0] == 0:
+        return 0.0, 0.0, 0.0, 0.0
+    x0 = x1 = positions[0, 0]
+    y0 = y1 = positions[0, 1]
+    for i in range(1, positions.shape[0]):
+        x, y = positions[i, 0], positions[i, 1]
+        x0, x1 = min(x0, x), max(x1, x)
+        y0, y1 = min(y0, y), max(y1, y)
+    return x0, y0, x1, y1
+
+
+@nb.njit(cache=True, inline="always")
+def scan_boxes(box, ids, a, s, e, buf, count):
+    """Test slot a against slots s..e-1 of `box` (rows lx, hx, ly, hy) and emit the overlapping
+    ones as pairs of `ids`; returns the new pair count."""
+    ax0, ax1, ay0, ay1 = box[a, 0], box[a, 1], box[a, 2], box[a, 3]
+    for b in range(s, e):
+        if (max(ax0, box[b, 0]) <= min(ax1, box[b, 1])) & (max(ay0, box[b, 2]) <= min(ay1, box[b, 3])):
+            emit(buf, count, ids[a], ids[b])
+            count += 1
+    return count
+
+
 class PairCollector:
     """Runs a pair kernel `kernel(*args, buf) -> (count, *counters)` with a buffer sized from the
     previous frame (pair counts change little between frames), retrying once if it overflowed."""

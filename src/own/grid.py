@@ -23,7 +23,7 @@ import numpy as np
 
 from engines.base import BroadPhase
 
-from .common import PairCollector, emit
+from .common import PairCollector, centre_extents, emit, scan_boxes
 
 # The grid has at most this many cells per object (cells are enlarged to fit), so tiny radii in a
 # huge box cannot allocate an unbounded grid. On the uniform r = 10 scene at the essay's density
@@ -47,20 +47,6 @@ def cell_of(v: float, origin: float, inv: float, last: float) -> int:
     """Cell index of coordinate v along one axis, clamped to 0..last (monotone in v). Clamping
     in floating point keeps it branch-free: branches here cost 2x in the build."""
     return int(min(max((v - origin) * inv, 0.0), last))
-
-
-@nb.njit(cache=True)
-def centre_extents(positions):
-    """(xmin, ymin, xmax, ymax) of the centres; (0, 0, 0, 0) for an empty scene."""
-    if positions.shape[0] == 0:
-        return 0.0, 0.0, 0.0, 0.0
-    x0 = x1 = positions[0, 0]
-    y0 = y1 = positions[0, 1]
-    for i in range(1, positions.shape[0]):
-        x, y = positions[i, 0], positions[i, 1]
-        x0, x1 = min(x0, x), max(x1, x)
-        y0, y1 = min(y0, y), max(y1, y)
-    return x0, y0, x1, y1
 
 
 @nb.njit(cache=True)
@@ -161,17 +147,6 @@ def grid_build(positions, radii, order, last_key, layout, limit, start, key, xyr
     return start, moved  # now start[c] = first slot of bucket c
 
 
-@nb.njit(cache=True, inline="always")
-def _scan(box, ids, a, s, e, buf, count):
-    """Test slot a against slots s..e-1; returns the new pair count."""
-    ax0, ax1, ay0, ay1 = box[a, LX], box[a, HX], box[a, LY], box[a, HY]
-    for b in range(s, e):
-        if (max(ax0, box[b, LX]) <= min(ax1, box[b, HX])) & (max(ay0, box[b, LY]) <= min(ay1, box[b, HY])):
-            emit(buf, count, ids[a], ids[b])
-            count += 1
-    return count
-
-
 @nb.njit(cache=True)
 def grid_pairs(ids, box, skey, start, layout, limit, buf):
     """Box-overlap pairs into buf, each once; returns (pairs found, pair tests)."""
@@ -188,10 +163,10 @@ def grid_pairs(ids, box, skey, start, layout, limit, buf):
         c = skey[a]
         e = start[c + 2]
         tests += e - a - 1
-        count = _scan(box, ids, a, a + 1, e, buf, count)
+        count = scan_boxes(box, ids, a, a + 1, e, buf, count)
         s, e = start[c + w - 1], start[c + w + 2]
         tests += e - s
-        count = _scan(box, ids, a, s, e, buf, count)
+        count = scan_boxes(box, ids, a, s, e, buf, count)
     if first_large == n:
         return count, tests
     # Large against small: the cells their box grown by a small radius covers, plus one cell on
@@ -206,7 +181,7 @@ def grid_pairs(ids, box, skey, start, layout, limit, buf):
         for cy in range(cy0, cy1 + 1):
             s, e = start[cy * w + cx0 + 1], start[cy * w + cx1 + 2]
             tests += e - s
-            count = _scan(box, ids, a, s, e, buf, count)
+            count = scan_boxes(box, ids, a, s, e, buf, count)
     # Large against large: sweep along x.
     by_x = first_large + np.argsort(box[first_large:, LX])
     for u in range(by_x.shape[0]):
