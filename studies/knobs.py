@@ -51,6 +51,7 @@ KNOBS: dict[str, list[Knob]] = {
     "own.bvh": [Knob("leaf_size", _fixed([1, 2, 4, 8, 16]), "objects per leaf")],
     "own.sap": [Knob("axis", AXES, "sweep axis")],
     "own.sap_incremental": [Knob("axis", AXES, "sweep axis")],
+    "own.sap_parallel": [Knob("axis", AXES, "sweep axis")],
     "chipmunk.hash": [Knob("dim", _sizes(_mean_diameter, HASH_DIM_FACTORS), "hash cell size dim"),
                       Knob("count", lambda s: [max(1000, int(f * s.n)) for f in (1, 3, 10, 30)], "hash table size count")],
     "coal.hash": [Knob("cell", _sizes(_mean_diameter, HASH_DIM_FACTORS), "hash cell size")],

@@ -40,6 +40,7 @@ def test_unknown_parameter_is_a_clear_error():
         ("own.quadtree", {"capacity": 0}, "capacity must be an integer >= 1"),
         ("own.bvh", {"leaf_size": 0}, "leaf_size must be an integer >= 1"),
         ("own.sap", {"axis": "z"}, "axis must be one of"),
+        ("own.sap_parallel", {"parallel_from": -1}, "parallel_from must be an integer >= 0"),
         ("essay.quadtree", {"capacity": "5"}, "capacity must be an integer"),
     ],
 )

@@ -21,6 +21,8 @@ EXACT = [
     ("own.sap", {"axis": "auto"}),
     ("own.sap_incremental", {}),
     ("own.sap", {"axis": "x", "incremental": True}),
+    ("own.sap_parallel", {"parallel_from": 0}),  # every sweep parallel, however small
+    ("own.sap", {"axis": "y", "parallel": True, "parallel_from": 0}),
     ("own.grid", {}),
     ("own.grid", {"p": 1}),
     ("own.grid", {"p": 7}),

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from own.parallel import threads
 from studies.scale import growth_exponent
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -36,5 +37,7 @@ def test_bench_quick_prints_the_targets():
                           capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
     lines = [line.split() for line in done.stdout.splitlines()[1:]]
-    assert [line[1] for line in lines] == ["own.grid", "own.sap", "own.quadtree"]
-    assert all(float(line[3]) > 0 and line[5].endswith("x") for line in lines)
+    assert [(line[1], line[3]) for line in lines] == [("own.grid", "1"), ("own.sap", "1"), ("own.quadtree", "1"),
+                                                      ("own.sap", str(threads()))]
+    assert [line[2] for line in lines][-1] == "own.sap_parallel"
+    assert all(float(line[4]) > 0 and line[6].endswith("x") and float(line[7]) > 0 for line in lines)

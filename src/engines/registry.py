@@ -16,6 +16,7 @@ BACKENDS: dict[str, str] = {
     "own.brute": "own.brute:Brute",
     "own.sap": "own.sap:SweepAndPrune",
     "own.sap_incremental": "own.sap:IncrementalSweepAndPrune",
+    "own.sap_parallel": "own.sap:ParallelSweepAndPrune",
     "own.grid": "own.grid:UniformGrid",
     "own.quadtree": "own.quadtree:Quadtree",
     "own.bvh": "own.bvh:LinearBvh",

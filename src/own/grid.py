@@ -8,10 +8,13 @@ extra bucket after the cells; they are swept against each other and tested again
 objects in the cells their box (grown by a small object's radius) covers. So mixed sizes stay
 exact, and a big object costs in proportion to its area rather than slowing every cell.
 
-Memory order is what matters at a million objects, so objects are kept in last frame's cell order:
-the counting sort then reads and writes memory almost sequentially. The cell layout is kept while
-it still fits the scene, so cells do not shift under objects that did not move. Cells are clamped
-to the layout (monotone in the coordinate), so an object outside it is still handled exactly.
+Memory order is what matters at a million objects, so objects are kept in last frame's cell order
+(with their radii): the counting sort then writes memory almost sequentially, and its only
+scattered reads, the centres, are done in one short loop that keeps many misses in flight. In
+input order instead, the histogram and the scatter jump through memory: 2x slower at n = 2^20.
+The cell layout is kept while it still fits the scene, so cells do not shift under objects that
+did not move. Cells are clamped to the layout (monotone in the coordinate), so an object outside
+it is still handled exactly.
 """
 
 from __future__ import annotations
@@ -99,15 +102,16 @@ def small_limit(extent, layout):
 
 
 @nb.njit(cache=True)
-def grid_build(positions, radii, order, last_key, layout, limit, start, key, xyr, ids, box, skey):
+def grid_build(positions, radii, order, last_key, layout, limit, start, key, xy, ids, box, skey, sradii):
     """Counting sort of objects into cells (large ones into the last bucket), stable in `order`.
 
     Keys live in a padded key space: rows of nx + 2 cells (an empty column on each side) and one
     empty row on top, so the pair search needs no edge cases (each costs a branch per object).
     Cell (cx, cy) has key cy * (nx + 2) + cx + 1; the large bucket has key (ny + 1) * (nx + 2).
-    `last_key` holds last frame's key per slot of `order` (or -1s). Fills slot ids, slot boxes
-    (n, 4) and slot keys; `key` and `xyr` are scratch. Every array is the caller's, reused from
-    frame to frame: fresh ones would cost a page fault per 4 KiB, at large n more than the sort.
+    `radii` and `last_key` are per slot of `order` (last frame's slot radii and keys, or the
+    input radii and -1s). Fills slot ids, boxes (n, 4), keys and radii; `key` and `xy` are
+    scratch. Every array is the caller's, reused from frame to frame: fresh ones would cost a page
+    fault per 4 KiB, at large n more than the sort.
     Returns (bucket starts, objects that changed cell): bucket k holds slots start[k]:start[k + 1];
     `start` is reused when it has the size of this layout's key space.
     """
@@ -119,30 +123,31 @@ def grid_build(positions, radii, order, last_key, layout, limit, start, key, xyr
     if start.shape[0] == large + 2:
         start[:] = 0
     else:
-        start = np.zeros(large + 2, dtype=np.int64)
-    # One pass reads the objects in `order` (the only scattered reads) into sequential arrays;
-    # the scatter then reads those and, when `order` is last frame's, writes almost in place.
+        start = np.zeros(large + 2, dtype=start.dtype)
+    # The only scattered reads: centres in `order`, in a loop so short that the CPU keeps many
+    # cache misses in flight (3x faster at n = 2^20 than computing keys in the same loop).
     for k in range(n):
         i = order[k]
-        x, y, r = positions[i, 0], positions[i, 1], radii[i]
-        xyr[k, 0], xyr[k, 1], xyr[k, 2] = x, y, r
-        c = cell_of(y, oy, inv_y, last_y) * w + cell_of(x, ox, inv_x, last_x) + 1
-        key[k] = c if 2.0 * r <= limit else large
+        xy[k, 0], xy[k, 1] = positions[i, 0], positions[i, 1]
     moved = 0
     for k in range(n):
-        c = key[k]
+        c = cell_of(xy[k, 1], oy, inv_y, last_y) * w + cell_of(xy[k, 0], ox, inv_x, last_x) + 1
+        c = c if 2.0 * radii[k] <= limit else large
+        key[k] = c
         start[c] += 1
         moved += c != last_key[k]
     total = 0
     for c in range(large + 2):  # start[c] = end of bucket c (a running sum: no reload per cell)
         total += start[c]
         start[c] = total
-    for k in range(n - 1, -1, -1):  # backwards, filling each bucket from its end: stable
+    # Backwards, filling each bucket from its end: stable. When `order` is last frame's, the
+    # writes land almost in place.
+    for k in range(n - 1, -1, -1):
         c = key[k]
         s = start[c] - 1
         start[c] = s
-        ids[s], skey[s] = order[k], c
-        x, y, r = xyr[k, 0], xyr[k, 1], xyr[k, 2]
+        ids[s], skey[s], sradii[s] = order[k], c, radii[k]
+        x, y, r = xy[k, 0], xy[k, 1], radii[k]
         box[s, LX], box[s, HX], box[s, LY], box[s, HY] = x - r, x + r, y - r, y + r
     return start, moved  # now start[c] = first slot of bucket c
 
@@ -198,15 +203,16 @@ def grid_pairs(ids, box, skey, start, layout, limit, buf):
 
 
 @nb.njit(cache=True)
-def grid_update(positions, radii, order, last_key, p, cell, max_cells, layout, start, key, xyr, ids, box, skey):
+def grid_update(positions, radii, order, last_key, p, cell, max_cells, layout, start, key, xy, slots):
     """One call per frame (each compiled call from Python costs microseconds): the layout, the
-    small-object limit and the build. Returns (relayout, limit, bucket starts, objects moved)."""
+    small-object limit and the build into `slots` (ids, boxes, keys, radii). Returns (relayout,
+    limit, bucket starts, objects moved)."""
     extent = centre_extents(positions)
     relayout = grid_layout(extent, positions.shape[0], p, cell, max_cells, layout)
     limit = small_limit(extent, layout)
     if relayout:
-        last_key = np.full(positions.shape[0], -1, dtype=np.int64)  # cells of another layout
-    start, moved = grid_build(positions, radii, order, last_key, layout, limit, start, key, xyr, ids, box, skey)
+        last_key = np.full(positions.shape[0], -1, dtype=last_key.dtype)  # cells of another layout
+    start, moved = grid_build(positions, radii, order, last_key, layout, limit, start, key, xy, *slots)
     return relayout, limit, start, moved
 
 
@@ -246,31 +252,28 @@ class UniformGrid(BroadPhase):
         self._max_cells = MAX_CELLS_PER_OBJECT * self.n + 16
         self._layout = np.zeros(6)
         n = self.n
-        self._ids = np.arange(n, dtype=np.int64)
-        self._key = np.full(n, -1, dtype=np.int64)
-        self._box = np.empty((n, 4))
-        # Work arrays kept from frame to frame; slots are double-buffered (the build reads last
-        # frame's order while it writes this frame's).
-        self._spare = (np.empty(n, dtype=np.int64), np.empty((n, 4)), np.empty(n, dtype=np.int64))
-        self._scratch = (np.empty(n, dtype=np.int64), np.empty((n, 3)))
+        # Slot arrays (ids, boxes, keys, radii), double-buffered: the build reads last frame's
+        # while it writes this frame's. Work arrays are kept from frame to frame.
+        self._slots = (np.arange(n, dtype=np.int64), np.empty((n, 4)), np.full(n, -1, dtype=np.int64), radii.copy())
+        self._spare = (np.empty(n, dtype=np.int64), np.empty((n, 4)), np.empty(n, dtype=np.int64), np.empty(n))
+        self._scratch = (np.empty(n, dtype=np.int64), np.empty((n, 2)))
         self._start = np.zeros(0, dtype=np.int64)
         self._collect = PairCollector()
         self._update(positions)
 
     def _update(self, positions):
         self._positions = positions
-        if self.params["coherent"]:
-            order, last_key = self._ids, self._key
+        ids, _, key, sradii = self._slots
+        if self.params["coherent"]:  # last frame's cell order
+            order, radii, last_key = ids, sradii, key
         else:  # input order; last frame's cells looked up per object
-            order, last_key = np.arange(self.n, dtype=np.int64), np.empty(self.n, dtype=np.int64)
-            last_key[self._ids] = self._key
-        ids, box, key = self._spare
+            order, radii, last_key = np.arange(self.n, dtype=np.int64), self.radii, np.empty_like(key)
+            last_key[ids] = key
         relayout, self._limit, self._start, moved = grid_update(
-            positions, self.radii, order, last_key, self._p, self._cell, self._max_cells, self._layout,
-            self._start, *self._scratch, ids, box, key,
+            positions, radii, order, last_key, self._p, self._cell, self._max_cells, self._layout,
+            self._start, *self._scratch, self._spare,
         )
-        self._spare = (self._ids, self._box, self._key)
-        self._ids, self._box, self._key = ids, box, key
+        self._slots, self._spare = self._spare, self._slots
         ncells = int(self._layout[NX] * self._layout[NY])
         self._stats = {"cells": ncells, "cell": float(self._layout[CW]), "large": self.n - int(self._start[self._large_key()]),
                        "moved": moved, "relayout": int(relayout)}
@@ -280,7 +283,8 @@ class UniformGrid(BroadPhase):
         return int((self._layout[NY] + 1) * (self._layout[NX] + 2))
 
     def _pairs(self):
-        out, (tests,) = self._collect(grid_pairs, self._ids, self._box, self._key, self._start, self._layout, self._limit)
+        ids, box, key, _ = self._slots
+        out, (tests,) = self._collect(grid_pairs, ids, box, key, self._start, self._layout, self._limit)
         self._stats["tests"] = tests
         return out
 
@@ -294,11 +298,12 @@ class UniformGrid(BroadPhase):
     def validate(self):
         nx, ny = int(self._layout[NX]), int(self._layout[NY])
         large = self._large_key()
-        start, ids, key = self._start, self._ids, self._key
+        start, (ids, _, key, sradii) = self._start, self._slots
         assert np.array_equal(np.sort(ids), np.arange(self.n)), "slot ids are not a permutation"
         assert start[0] == 0 and start[-1] == self.n and (np.diff(start) >= 0).all(), "bucket starts are not a prefix sum"
         assert np.array_equal(key, np.repeat(np.arange(large + 1), np.diff(start))), "slots are not sorted by key"
-        small = 2.0 * self.radii[ids] <= self._limit
+        assert np.array_equal(sradii, self.radii[ids]), "slot radii are not the objects' radii"
+        small = 2.0 * sradii <= self._limit
         assert np.array_equal(small, key < large), "an object is in the wrong bucket for its size"
         assert self._limit < min(self._layout[CW], self._layout[CH]), "small objects could span two cells"
         ox, oy, cw, ch = self._layout[[OX, OY, CW, CH]]

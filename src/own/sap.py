@@ -8,6 +8,7 @@ import numpy as np
 from engines.base import BroadPhase
 
 from .common import PairCollector, emit
+from .parallel import ChunkedPairCollector
 from .radix import radix_argsort, sortable_bits
 
 AXES = ("x", "y", "auto")
@@ -16,6 +17,11 @@ AXES = ("x", "y", "auto")
 MAX_SWAPS_PER_OBJECT = 8
 # Objects tested per vectorised chunk of a sweep window (64 measured best of 8..256 at n = 2^17).
 SWEEP_CHUNK = 64
+# Default `parallel_from`: a parallel sweep runs on every core only once last frame's had this
+# many sweep-axis overlaps (its work). Handing chunks to the other thread costs 0.5 to 1 ms a
+# call on a shared 2-core machine, measured to pay from about 2^23 (n = 65536 at the essay's
+# density).
+PARALLEL_FROM_OVERLAPS = 2**23
 
 
 @nb.njit(cache=True)
@@ -51,35 +57,53 @@ def _insertion_sort(order: np.ndarray, keys: np.ndarray, max_swaps: int) -> int:
 
 
 @nb.njit(cache=True)
-def sap_prepare(positions, radii, axis_mode, order, incremental):
-    """The sweep's sorted arrays for this frame.
+def _gather(positions, radii, order, xy, sr):
+    """Centres and radii in `order`: the scattered reads, in a loop so short that the CPU keeps
+    many cache misses in flight (3x faster at n = 2^20 than a loop that also computes bounds)."""
+    for a in range(order.shape[0]):
+        i = order[a]
+        xy[a, 0], xy[a, 1], sr[a] = positions[i, 0], positions[i, 1], radii[i]
 
-    axis_mode: 0 x, 1 y, 2 largest variance. With `incremental`, `order` (last frame's) is
-    repaired by insertion sort when the axis is unchanged, else sorted from scratch.
-    Returns (axis, order, s_lo, s_hi, o_lo, o_hi, swaps); swaps is -1 after a full sort.
+
+@nb.njit(cache=True)
+def sap_prepare(positions, radii, axis_mode, last_order, incremental, order, work, sorted_bounds):
+    """Sort for this frame's sweep into `order` and `sorted_bounds` (s_lo, s_hi, o_lo, o_hi).
+
+    axis_mode: 0 x, 1 y, 2 largest variance. With `incremental`, `last_order` (last frame's, its
+    axis in its last entry) is repaired by insertion sort when the axis is unchanged, else the
+    objects are sorted from scratch. `order` (n + 1), `work` (xy, radii, keys, permutation) and
+    `sorted_bounds` are the caller's, reused from frame to frame (fresh arrays cost a page fault
+    per 4 KiB, at large n as much as the sort). Returns (axis, swaps); swaps is -1 after a full sort.
     """
     n = positions.shape[0]
+    xy, sr, keys, perm = work
+    s_lo, s_hi, o_lo, o_hi = sorted_bounds
     axis = axis_mode if axis_mode < 2 else (1 if _y_varies_more(positions) else 0)
     other = 1 - axis
     swaps = -1
-    if incremental and order.shape[0] == n + 1 and n > 0 and order[n] == axis:
-        order = order.copy()
-        keys = np.empty(n)
+    if incremental and last_order.shape[0] == n + 1 and n > 0 and last_order[n] == axis:
+        _gather(positions, radii, last_order[:n], xy, sr)
         for a in range(n):
-            keys[a] = positions[order[a], axis] - radii[order[a]]
-        swaps = _insertion_sort(order[:n], keys, MAX_SWAPS_PER_OBJECT * n + 64)
+            keys[a] = xy[a, axis] - sr[a]
+            perm[a] = a
+        swaps = _insertion_sort(perm, keys, MAX_SWAPS_PER_OBJECT * n + 64)
+        if swaps >= 0:
+            for a in range(n):
+                order[a] = last_order[perm[a]]
     if swaps < 0:
-        order = np.empty(n + 1, dtype=np.int64)
-        order[:n] = radix_argsort(sortable_bits(positions[:, axis] - radii))
+        for i in range(n):
+            keys[i] = positions[i, axis] - radii[i]
+        order[:n] = radix_argsort(sortable_bits(keys))
+        _gather(positions, radii, order[:n], xy, sr)
+        for a in range(n):
+            perm[a] = a
     order[n] = axis  # remember the axis the order belongs to
-    s_lo, s_hi, o_lo, o_hi = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    for a in range(n):
-        i = order[a]
-        s_lo[a] = positions[i, axis] - radii[i]
-        s_hi[a] = positions[i, axis] + radii[i]
-        o_lo[a] = positions[i, other] - radii[i]
-        o_hi[a] = positions[i, other] + radii[i]
-    return axis, order, s_lo, s_hi, o_lo, o_hi, swaps
+    for a in range(n):  # perm is almost the identity: near-sequential reads
+        j = perm[a]
+        r = sr[j]
+        s_lo[a], s_hi[a] = xy[j, axis] - r, xy[j, axis] + r
+        o_lo[a], o_hi[a] = xy[j, other] - r, xy[j, other] + r
+    return axis, swaps
 
 
 @nb.njit(cache=True, inline="always")
@@ -103,19 +127,19 @@ def _window_end(s_lo, a, top, prev_end, prev_top):
 
 
 @nb.njit(cache=True)
-def sap_sweep(order, s_lo, s_hi, o_lo, o_hi, buf):
-    """Box-overlap pairs into buf; returns (pairs found, pairs overlapping on the sweep axis).
+def _sweep_range(order, s_lo, s_hi, o_lo, o_hi, a0, a1, buf):
+    """Pairs of the objects in sorted slots a0..a1-1 with later ones, into buf; returns (pairs
+    found, pairs overlapping on the sweep axis).
 
     Each object's window (the later objects overlapping it on the sweep axis) is found first,
     then tested on the other axis in chunks: a chunk's hits are counted by a loop over slices,
     which the compiler vectorises (indices from zero cannot wrap around), and only a chunk with
     a hit is walked again to emit its pairs. Measured 2.5x faster than a test-and-emit loop.
     """
-    n = s_lo.shape[0]
     count = 0
     axis_hits = 0
     end, prev_top = 0, -np.inf
-    for a in range(n):
+    for a in range(a0, a1):
         top, lo_a, hi_a, i = s_hi[a], o_lo[a], o_hi[a], order[a]
         end = _window_end(s_lo, a, top, end, prev_top)
         prev_top = top
@@ -134,17 +158,37 @@ def sap_sweep(order, s_lo, s_hi, o_lo, o_hi, buf):
     return count, axis_hits
 
 
+@nb.njit(cache=True)
+def sap_sweep(order, s_lo, s_hi, o_lo, o_hi, buf):
+    """Box-overlap pairs into buf; returns (pairs found, pairs overlapping on the sweep axis)."""
+    return _sweep_range(order, s_lo, s_hi, o_lo, o_hi, 0, s_lo.shape[0], buf)
+
+
+@nb.njit(cache=True, parallel=True)
+def sap_sweep_parallel(order, s_lo, s_hi, o_lo, o_hi, bufs):
+    """sap_sweep with the objects split into one chunk per row of bufs, swept in parallel (each
+    window is independent); returns (pairs per chunk, sweep-axis overlaps per chunk)."""
+    chunks, n = bufs.shape[0], s_lo.shape[0]
+    counts, axis_hits = np.zeros(chunks, dtype=np.int64), np.zeros(chunks, dtype=np.int64)
+    for c in nb.prange(chunks):
+        counts[c], axis_hits[c] = _sweep_range(order, s_lo, s_hi, o_lo, o_hi, c * n // chunks,
+                                               (c + 1) * n // chunks, bufs[c])
+    return counts, axis_hits
+
+
 class SweepAndPrune(BroadPhase):
     """Sweep and prune; `axis` is "x" (the essay), "y" or "auto" (largest variance of the centres).
 
     Emits only pairs whose boxes overlap on both axes. Cost grows with the number of pairs that
     overlap on the sweep axis alone, so clumping along that axis hurts; "auto" avoids the worse
     one. With `incremental`, the sorted order is kept between frames and repaired by insertion
-    sort, which costs O(n) while objects move little (temporal coherence).
+    sort, which costs O(n) while objects move little (temporal coherence). `parallel` sweeps on
+    every core once last frame's sweep had `parallel_from` sweep-axis overlaps (the sort stays
+    single-threaded).
     """
 
     name = "own.sap"
-    defaults = {"axis": "auto", "incremental": False}
+    defaults = {"axis": "auto", "incremental": False, "parallel": False, "parallel_from": PARALLEL_FROM_OVERLAPS}
 
     def __init__(self, **params):
         super().__init__(**params)
@@ -152,22 +196,35 @@ class SweepAndPrune(BroadPhase):
             raise ValueError(f"{self.name}: axis must be one of {', '.join(AXES)}, got {self.params['axis']!r}")
         self._axis_mode = AXES.index(self.params["axis"])
         self._incremental = bool(self.params["incremental"])
-        self._order = np.empty(0, dtype=np.int64)
+        self._parallel_from = self._int_param("parallel_from", 0)
         self._collect = PairCollector()
+        self._collect_chunks = ChunkedPairCollector() if self.params["parallel"] else None
+        self._last_overlaps = 0
 
     def _reset(self, positions, radii):
-        self._order = np.empty(0, dtype=np.int64)
+        n = self.n
+        # The order is double-buffered (the repair reads last frame's while it writes this
+        # frame's); every work array is kept from frame to frame.
+        self._order, self._spare_order = np.empty(0, dtype=np.int64), np.empty(n + 1, dtype=np.int64)
+        self._work = (np.empty((n, 2)), np.empty(n), np.empty(n), np.empty(n, dtype=np.int64))
+        self._sorted = tuple(np.empty(n) for _ in range(4))
         self._update(positions)
 
     def _update(self, positions):
-        axis, self._order, *self._sorted, swaps = sap_prepare(
-            positions, self.radii, self._axis_mode, self._order, self._incremental
-        )
+        axis, swaps = sap_prepare(positions, self.radii, self._axis_mode, self._order, self._incremental,
+                                  self._spare_order, self._work, self._sorted)
+        if self._order.shape[0] == self.n + 1:
+            self._order, self._spare_order = self._spare_order, self._order
+        else:  # the first frame: no last order to recycle yet
+            self._order, self._spare_order = self._spare_order, np.empty(self.n + 1, dtype=np.int64)
         self._stats = {"axis": axis, "swaps": swaps}
 
     def _pairs(self):
-        out, (axis_hits,) = self._collect(sap_sweep, self._order[:self.n], *self._sorted)
-        self._stats["axis_overlaps"] = axis_hits
+        if self._collect_chunks is not None and self._last_overlaps >= self._parallel_from:
+            out, (axis_hits,) = self._collect_chunks(sap_sweep_parallel, self._order[:self.n], *self._sorted)
+        else:
+            out, (axis_hits,) = self._collect(sap_sweep, self._order[:self.n], *self._sorted)
+        self._stats["axis_overlaps"] = self._last_overlaps = axis_hits
         return out
 
     def structure(self):
@@ -184,4 +241,12 @@ class IncrementalSweepAndPrune(SweepAndPrune):
     """Sweep and prune that keeps its sorted order between frames (insertion-sort repair)."""
 
     name = "own.sap_incremental"
-    defaults = {"axis": "auto", "incremental": True}
+    defaults = {"axis": "auto", "incremental": True, "parallel": False, "parallel_from": PARALLEL_FROM_OVERLAPS}
+
+
+class ParallelSweepAndPrune(SweepAndPrune):
+    """The incremental sweep and prune with its sweep on every core (the only backend here that
+    uses more than one thread: compare its figures with that in mind)."""
+
+    name = "own.sap_parallel"
+    defaults = {"axis": "auto", "incremental": True, "parallel": True, "parallel_from": PARALLEL_FROM_OVERLAPS}
