@@ -70,10 +70,11 @@ def sap_prepare(positions, radii, axis_mode, last_order, incremental, order, wor
     """Sort for this frame's sweep into `order` and `sorted_bounds` (s_lo, s_hi, o_lo, o_hi).
 
     axis_mode: 0 x, 1 y, 2 largest variance. With `incremental`, `last_order` (last frame's, its
-    axis in its last entry) is repaired by insertion sort when the axis is unchanged, else the
-    objects are sorted from scratch. `order` (n + 1), `work` (xy, radii, keys, permutation) and
-    `sorted_bounds` are the caller's, reused from frame to frame (fresh arrays cost a page fault
-    per 4 KiB, at large n as much as the sort). Returns (axis, swaps); swaps is -1 after a full sort.
+    axis in its last entry, -1 before the first frame) is repaired by insertion sort when the axis
+    is unchanged, else the objects are sorted from scratch. `order` (n + 1), `work` (xy, radii,
+    keys, permutation) and `sorted_bounds` are the caller's, reused from frame to frame (fresh
+    arrays cost a page fault per 4 KiB, at large n as much as the sort). Returns (axis, swaps);
+    swaps is -1 after a full sort.
     """
     n = positions.shape[0]
     xy, sr, keys, perm = work
@@ -81,7 +82,7 @@ def sap_prepare(positions, radii, axis_mode, last_order, incremental, order, wor
     axis = axis_mode if axis_mode < 2 else (1 if _y_varies_more(positions) else 0)
     other = 1 - axis
     swaps = -1
-    if incremental and last_order.shape[0] == n + 1 and n > 0 and last_order[n] == axis:
+    if incremental and n > 0 and last_order[n] == axis:
         _gather(positions, radii, last_order[:n], xy, sr)
         for a in range(n):
             keys[a] = xy[a, axis] - sr[a]
@@ -204,8 +205,8 @@ class SweepAndPrune(BroadPhase):
     def _reset(self, positions, radii):
         n = self.n
         # The order is double-buffered (the repair reads last frame's while it writes this
-        # frame's); every work array is kept from frame to frame.
-        self._order, self._spare_order = np.empty(0, dtype=np.int64), np.empty(n + 1, dtype=np.int64)
+        # frame's); its last entry is its axis, none yet. Every work array is kept between frames.
+        self._order, self._spare_order = np.full(n + 1, -1, dtype=np.int64), np.empty(n + 1, dtype=np.int64)
         self._work = (np.empty((n, 2)), np.empty(n), np.empty(n), np.empty(n, dtype=np.int64))
         self._sorted = tuple(np.empty(n) for _ in range(4))
         self._update(positions)
@@ -213,10 +214,7 @@ class SweepAndPrune(BroadPhase):
     def _update(self, positions):
         axis, swaps = sap_prepare(positions, self.radii, self._axis_mode, self._order, self._incremental,
                                   self._spare_order, self._work, self._sorted)
-        if self._order.shape[0] == self.n + 1:
-            self._order, self._spare_order = self._spare_order, self._order
-        else:  # the first frame: no last order to recycle yet
-            self._order, self._spare_order = self._spare_order, np.empty(self.n + 1, dtype=np.int64)
+        self._order, self._spare_order = self._spare_order, self._order
         self._stats = {"axis": axis, "swaps": swaps}
 
     def _pairs(self):
