@@ -38,6 +38,7 @@ def test_unknown_parameter_is_a_clear_error():
         ("own.grid", {"cell": -1.0}, "cell must be a positive"),
         ("own.grid", {"p": 4, "cell": 1.0}, "not both"),
         ("own.quadtree", {"capacity": 0}, "capacity must be an integer >= 1"),
+        ("own.quadtree", {"max_depth": 27}, "max_depth must be at most 26"),
         ("own.bvh", {"leaf_size": 0}, "leaf_size must be an integer >= 1"),
         ("own.sap", {"axis": "z"}, "axis must be one of"),
         ("own.sap_parallel", {"parallel_from": -1}, "parallel_from must be an integer >= 0"),

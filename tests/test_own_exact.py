@@ -162,15 +162,17 @@ def test_grid_counts_objects_that_change_cell_the_same_with_or_without_coherence
     assert 0 < moved[True] < 0.05 * 2000  # objects moving 1/6 unit per frame seldom change cell
 
 
-def test_incremental_sap_repairs_small_motion_and_resorts_after_large():
+@pytest.mark.parametrize("name", ["own.sap_incremental", "own.quadtree"])
+def test_coherent_sorts_repair_small_motion_and_resort_after_large(name):
     traj = simulate(generate("uniform", 500, seed=2, speed=30.0), frames=5)
-    sap = engines.create("own.sap_incremental")
-    sap.reset(traj.positions[0], traj.scene.radii)
-    assert sap.stats()["swaps"] == -1  # the first frame is a full sort
-    sap.update(traj.positions[1])
-    assert 0 <= sap.stats()["swaps"] < 500  # a cheap repair
+    backend = engines.create(name)
+    backend.reset(traj.positions[0], traj.scene.radii)
+    assert backend.stats()["swaps"] == -1  # the first frame is a full sort
+    backend.update(traj.positions[1])
+    assert 0 <= backend.stats()["swaps"] < 500  # a cheap repair
+    backend.validate()
     shuffled = np.random.default_rng(0).permutation(traj.positions[2])
-    sap.update(shuffled)
-    assert sap.stats()["swaps"] == -1  # too much motion: sorted from scratch
-    assert set(map(tuple, sap.pairs().tolist())) == set(map(tuple, brute_pairs(shuffled, traj.scene.radii).tolist()))
-    sap.validate()
+    backend.update(shuffled)
+    assert backend.stats()["swaps"] == -1  # too much motion: sorted from scratch
+    assert set(map(tuple, backend.pairs().tolist())) == set(map(tuple, brute_pairs(shuffled, traj.scene.radii).tolist()))
+    backend.validate()

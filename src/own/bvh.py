@@ -19,23 +19,13 @@ import numpy as np
 from engines.base import BroadPhase
 
 from .common import PairCollector, centre_extents, scan_boxes
-from .radix import radix_argsort
+from .morton import interleave
+from .radix import radix_sort
 
 MORTON_BITS = 16  # per axis: 2^16 lattice steps over the centres' extent
 # Node table columns: first and last sorted object, left and right child (NO_CHILD in leaves).
 FIRST, LAST, LEFT, RIGHT = range(4)
 NO_CHILD = -1
-
-
-@nb.njit(cache=True, inline="always")
-def _spread(v: np.uint64) -> np.uint64:
-    """The 16 low bits of v moved to the even bit positions (0, 2, 4, ...)."""
-    v &= np.uint64(0xFFFF)
-    v = (v | (v << np.uint64(8))) & np.uint64(0x00FF00FF)
-    v = (v | (v << np.uint64(4))) & np.uint64(0x0F0F0F0F)
-    v = (v | (v << np.uint64(2))) & np.uint64(0x33333333)
-    v = (v | (v << np.uint64(1))) & np.uint64(0x55555555)
-    return v
 
 
 @nb.njit(cache=True)
@@ -52,7 +42,7 @@ def morton_codes(positions: np.ndarray) -> np.ndarray:
     for i in range(n):  # (sx = 0 when the extent is a point or overflows: then inf * 0 is avoided)
         qx = np.uint64(min(max((positions[i, 0] - x0) * sx, 0.0), top)) if sx > 0 else np.uint64(0)
         qy = np.uint64(min(max((positions[i, 1] - y0) * sy, 0.0), top)) if sy > 0 else np.uint64(0)
-        codes[i] = _spread(qx) | (_spread(qy) << np.uint64(1))
+        codes[i] = interleave(qx, qy)
     return codes
 
 
@@ -82,8 +72,7 @@ def bvh_build(positions, radii, leaf_size):
     the object boxes in sorted order (lx, hx, ly, hy per row)."""
     n = positions.shape[0]
     codes = morton_codes(positions)
-    order = radix_argsort(codes)
-    sorted_codes = codes[order]
+    order, sorted_codes = radix_sort(codes)
     box = np.empty((n, 4))
     for a in range(n):
         i = order[a]

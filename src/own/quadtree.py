@@ -1,12 +1,18 @@
-"""Quadtree of boxes in flat arrays: each object lives in the deepest node whose region holds its box.
+"""Linear region quadtree: each object lives in the deepest node whose region holds its box.
 
-Objects are kept in one permutation array so that every node's subtree is a contiguous slice
-perm[start:end], with the node's own objects first (perm[start:stay]). Children split a node at
-its middle with strict tests (left: hi < mid, right: lo >= mid), so boxes in different children
-never touch and a box that touches the middle line stays in the parent. Pairs are found per
-object: against the later objects of its own node, then down the children whose closed region
-meets its box. Regions are stored as exact bounds (a child inherits its parent's and the mid
-value), so that pruning never loses a pair to rounding: no pair is missed, none found twice.
+Regions are the cells of a 2^D x 2^D lattice over the square around all boxes (D = max_depth).
+A box's corners are quantised to lattice steps, and its cell at depth d is given by the top d
+bits of both corners' steps, as long as they agree there. Each object's key is the Morton code
+of its deepest such cell, then that depth; sorting the keys (a radix sort) gives the tree's
+pre-order, with each node's own objects before its four children's subtrees. So every node is
+one contiguous slice of the sorted objects, and the children's slices are found by binary search
+on the keys, instead of moving the objects level by level (Gargantini's linear quadtree).
+
+Quantising is monotone in the coordinate, so boxes whose steps lie in different cells of one
+depth cannot touch: pairs are found only between an object and the later objects of its own node
+and of the nodes below it. Node bounds are the exact float64 union of the boxes below them, so
+pruning never loses a pair; the boxes are stored in sorted order, one row each, so that every
+scan reads memory in sequence.
 """
 
 from __future__ import annotations
@@ -16,121 +22,176 @@ import numpy as np
 
 from engines.base import BroadPhase
 
-from .common import PairCollector, boxes, emit, extents, overlap
+from numba.cpython.unsafe.numbers import leading_zeros
 
-# Columns of the integer node table.
-START, STAY, END, DEPTH, CHILD = range(5)
+from .common import PairCollector, gather, insertion_sort, scan_columns
+from .morton import interleave
+from .radix import radix_sort
+
+# Keys are (Morton code of the cell, padded to depth D) << LEVEL_BITS | depth: 2 D + 5 bits.
+LEVEL_BITS = 5
+LEVEL_MASK = (1 << LEVEL_BITS) - 1
+# A repair of last frame's order gives up past this many swaps per object and radix-sorts: an
+# object that changes depth jumps a whole subtree, and at n = 2^20 a swap costs about 1/16 of
+# what the radix sort costs per object.
+MAX_SWAPS_PER_OBJECT = 16
+MAX_DEPTH = 26  # 2 * 26 + 5 = 57 key bits; 2^26 cells per side is finer than any scene needs
+# Columns of the node table: slice (start, end of own objects, end), depth, first of the four
+# children (NO_CHILD in a leaf), and the node's cell on the lattice of its depth.
+START, STAY, END, DEPTH, CHILD, CX, CY = range(7)
 NO_CHILD = -1
-STRADDLE = 4  # class of an object that fits no child
-
-
-@nb.njit(cache=True, inline="always")
-def _half(lo: float, hi: float, mid: float) -> int:
-    """0: the interval lies below mid, 1: at or above it, -1: it straddles mid."""
-    if hi < mid:
-        return 0
-    if lo >= mid:
-        return 1
-    return -1
-
-
-@nb.njit(cache=True, inline="always")
-def child_class(lo, hi, i, mid_x, mid_y):
-    """0..3 for the child quadrant that holds box i entirely, STRADDLE if none does."""
-    qx, qy = _half(lo[i, 0], hi[i, 0], mid_x), _half(lo[i, 1], hi[i, 1], mid_y)
-    if qx < 0 or qy < 0:
-        return STRADDLE
-    return 2 * qy + qx
 
 
 @nb.njit(cache=True)
-def quadtree_build(lo, hi, x0, y0, x1, y1, capacity, max_depth):
-    """Node table (int: start, stay, end, depth, first child; float: x0, y0, x1, y1) and the permutation."""
-    n = lo.shape[0]
-    perm = np.arange(n)
-    scratch = np.empty(n, dtype=np.int64)
-    nodes = np.empty((64, 5), dtype=np.int64)
-    bounds = np.empty((64, 4), dtype=np.float64)
-    nodes[0] = (0, n, n, 0, NO_CHILD)
-    bounds[0] = (x0, y0, x1, y1)
+def box_frame(positions, radii):
+    """(x0, y0, size): the square around all boxes; size is 0 when it is a point or overflows."""
+    n = positions.shape[0]
+    if n == 0:
+        return 0.0, 0.0, 0.0
+    x0, y0 = np.inf, np.inf
+    x1, y1 = -np.inf, -np.inf
+    for i in range(n):
+        x, y, r = positions[i, 0], positions[i, 1], radii[i]
+        x0, x1 = min(x0, x - r), max(x1, x + r)
+        y0, y1 = min(y0, y - r), max(y1, y + r)
+    size = max(x1 - x0, y1 - y0)
+    return x0, y0, (size if np.isfinite(size) else 0.0)
+
+
+@nb.njit(cache=True)
+def quadtree_keys(xy, sr, depth, x0, y0, size, keys):
+    """Into `keys`: each object's deepest cell (Morton code at depth `depth`) and that cell's depth."""
+    scale = (1 << depth) / size if size > 0 else 0.0
+    if not (scale > 0 and np.isfinite(scale)):
+        keys[:] = 0  # one cell: everything stays in the root
+        return
+    top = float((1 << depth) - 1)
+    for a in range(xy.shape[0]):
+        x, y, r = xy[a, 0], xy[a, 1], sr[a]
+        # (x - r) - x0 >= 0 exactly, as x0 is the least such value; min() keeps the far edge in.
+        qlx, qhx = int(min(((x - r) - x0) * scale, top)), int(min(((x + r) - x0) * scale, top))
+        qly, qhy = int(min(((y - r) - y0) * scale, top)), int(min(((y + r) - y0) * scale, top))
+        # The box straddles a cell line at every level below the highest bit where its corners differ.
+        level = depth - (64 - leading_zeros(np.uint64((qlx ^ qhx) | (qly ^ qhy))))
+        mask = -1 << (depth - level)
+        keys[a] = (interleave(qlx & mask, qly & mask) << np.uint64(LEVEL_BITS)) | np.uint64(level)
+
+
+@nb.njit(cache=True, inline="always")
+def _lower_bound(keys, s, e, value):
+    """First slot in s..e-1 whose key is >= value (e if none)."""
+    while s < e:
+        m = (s + e) >> 1
+        if keys[m] < value:
+            s = m + 1
+        else:
+            e = m
+    return s
+
+
+@nb.njit(cache=True)
+def quadtree_nodes(skeys, depth, capacity):
+    """Node table over the sorted keys, breadth first (children after their parent)."""
+    n = skeys.shape[0]
+    nodes = np.empty((64, 7), dtype=np.int64)
+    nodes[0] = (0, n, n, 0, NO_CHILD, 0, 0)
     count = 1
     k = 0
-    while k < count:  # nodes are appended in breadth-first order; process them in that order
-        s, e, depth = nodes[k, START], nodes[k, END], nodes[k, DEPTH]
-        if e - s <= capacity or depth >= max_depth:
-            k += 1
+    while k < count:
+        s, e, d = nodes[k, START], nodes[k, END], nodes[k, DEPTH]
+        stay = s  # the node's own objects (cell depth d) sort first in its slice
+        while stay < e and (skeys[stay] & np.uint64(LEVEL_MASK)) == d:
+            stay += 1
+        if e - s <= capacity or d >= depth or stay == e:
+            k += 1  # a leaf: all of its slice is its own (STAY = END, as initialised)
             continue
-        bx0, by0, bx1, by1 = bounds[k, 0], bounds[k, 1], bounds[k, 2], bounds[k, 3]
-        mid_x, mid_y = 0.5 * (bx0 + bx1), 0.5 * (by0 + by1)
-        # Counting sort of the slice by class: straddlers first, then quadrants 0..3.
-        sizes = np.zeros(5, dtype=np.int64)
-        for a in range(s, e):
-            c = child_class(lo, hi, perm[a], mid_x, mid_y)
-            scratch[a] = c
-            sizes[c] += 1
-        if sizes[STRADDLE] == e - s:
-            k += 1  # splitting would not separate anything
-            continue
-        offsets = np.empty(5, dtype=np.int64)
-        offsets[STRADDLE] = s
-        at = s + sizes[STRADDLE]
-        for c in range(4):
-            offsets[c] = at
-            at += sizes[c]
-        moved = np.empty(e - s, dtype=np.int64)
-        for a in range(s, e):
-            c = scratch[a]
-            moved[offsets[c] - s] = perm[a]
-            offsets[c] += 1
-        perm[s:e] = moved
         if count + 4 > nodes.shape[0]:
             nodes = np.concatenate((nodes, np.empty_like(nodes)))
-            bounds = np.concatenate((bounds, np.empty_like(bounds)))
-        nodes[k, STAY] = s + sizes[STRADDLE]
-        nodes[k, CHILD] = count
-        at = s + sizes[STRADDLE]
-        for c in range(4):
-            nodes[count] = (at, at + sizes[c], at + sizes[c], depth + 1, NO_CHILD)
-            bounds[count, 0] = mid_x if c & 1 else bx0
-            bounds[count, 1] = mid_y if c & 2 else by0
-            bounds[count, 2] = bx1 if c & 1 else mid_x
-            bounds[count, 3] = by1 if c & 2 else mid_y
-            at += sizes[c]
+        nodes[k, STAY], nodes[k, CHILD] = stay, count
+        cx, cy = nodes[k, CX], nodes[k, CY]
+        shift = 2 * (depth - d - 1)  # code bits below a child's cell
+        at = stay
+        for c in range(4):  # Morton order: (x, y) = (0, 0), (1, 0), (0, 1), (1, 1)
+            qx, qy = 2 * cx + (c & 1), 2 * cy + (c >> 1)
+            if c < 3:
+                nx, ny = 2 * cx + ((c + 1) & 1), 2 * cy + ((c + 1) >> 1)
+                bound = ((interleave(nx, ny) << np.uint64(shift)) << np.uint64(LEVEL_BITS))
+                end = _lower_bound(skeys, at, e, bound)
+            else:
+                end = e
+            nodes[count] = (at, end, end, d + 1, NO_CHILD, qx, qy)
+            at = end
             count += 1
         k += 1
-    return nodes[:count], bounds[:count], perm
+    return nodes[:count]
 
 
 @nb.njit(cache=True)
-def quadtree_from(positions, radii, capacity, max_depth):
-    """Boxes and the tree over them, rooted at a square around all boxes."""
-    lo, hi = boxes(positions, radii)
-    x0, y0, x1, y1 = extents(lo, hi)
-    # max() keeps the square holding every box whatever x0 + size rounds to.
-    size = max(x1 - x0, y1 - y0)
-    nodes, bounds, perm = quadtree_build(lo, hi, x0, y0, max(x0 + size, x1), max(y0 + size, y1), capacity, max_depth)
-    return lo, hi, nodes, bounds, perm
+def node_bounds(nodes, box):
+    """Each node's bounds (x0, y0, x1, y1): the exact union of the boxes in its subtree (empty
+    nodes get an inverted box that meets nothing)."""
+    bounds = np.empty((nodes.shape[0], 4))
+    for k in range(nodes.shape[0] - 1, -1, -1):  # children before parents
+        x0, y0, x1, y1 = np.inf, np.inf, -np.inf, -np.inf
+        for a in range(nodes[k, START], nodes[k, STAY]):
+            x0, x1 = min(x0, box[0, a]), max(x1, box[1, a])
+            y0, y1 = min(y0, box[2, a]), max(y1, box[3, a])
+        if nodes[k, CHILD] != NO_CHILD:
+            for m in range(nodes[k, CHILD], nodes[k, CHILD] + 4):
+                x0, y0 = min(x0, bounds[m, 0]), min(y0, bounds[m, 1])
+                x1, y1 = max(x1, bounds[m, 2]), max(y1, bounds[m, 3])
+        bounds[k, 0], bounds[k, 1], bounds[k, 2], bounds[k, 3] = x0, y0, x1, y1
+    return bounds
 
 
 @nb.njit(cache=True)
-def quadtree_pairs(lo, hi, nodes, bounds, perm, buf):
-    """Each node's own objects against the rest of their node and the children their boxes meet.
-    Returns (pairs found, pair tests, nodes visited)."""
-    stack = np.empty(4 * (int(nodes[:, DEPTH].max()) + 2), dtype=np.int64)
-    count = 0
-    tests = 0
-    visited = 0
+def quadtree_build(positions, radii, depth, capacity, last_order, order, work, box):
+    """This frame's sorted order into `order` and boxes in that order into `box` (rows lx, hx, ly, hy);
+    returns the sorted keys, node table, node bounds, lattice square (x0, y0, size) and the
+    insertion-sort swaps (-1 after a sort from scratch).
+
+    The objects are taken in last frame's order (`last_order`, its first entry -1 before the first
+    frame), so that the keys are almost sorted: an insertion sort repairs them in O(n) while few
+    objects change cell, and the boxes are then filled from near-sequential reads. `work` (xy,
+    radii, keys, permutation) is the caller's, reused from frame to frame.
+    """
+    n = positions.shape[0]
+    xy, sr, keys, perm = work
+    fresh = n == 0 or last_order[0] < 0
+    gather(positions, radii, np.arange(n) if fresh else last_order, xy, sr)
+    x0, y0, size = box_frame(xy, sr)
+    quadtree_keys(xy, sr, depth, x0, y0, size, keys)
+    for a in range(n):
+        perm[a] = a
+    swaps = -1 if fresh else insertion_sort(perm, keys, MAX_SWAPS_PER_OBJECT)
+    if swaps < 0:
+        quadtree_keys(xy, sr, depth, x0, y0, size, keys)  # the failed repair left them part-sorted
+        sorted_perm, sorted_keys = radix_sort(keys)
+        perm[:] = sorted_perm
+        keys[:] = sorted_keys
+    for a in range(n):  # perm is almost the identity: near-sequential reads
+        j = perm[a]
+        order[a] = j if fresh else last_order[j]
+        x, y, r = xy[j, 0], xy[j, 1], sr[j]
+        box[0, a], box[1, a], box[2, a], box[3, a] = x - r, x + r, y - r, y + r
+    nodes = quadtree_nodes(keys, depth, capacity)
+    return keys, nodes, node_bounds(nodes, box), (x0, y0, size), swaps
+
+
+@nb.njit(cache=True)
+def quadtree_pairs(order, box, nodes, bounds, buf):
+    """Each node's own objects against the later ones of their node and the objects of the nodes
+    below it whose bounds their boxes meet. Returns (pairs found, pair tests, nodes visited)."""
+    stack = np.empty(4 * (MAX_DEPTH + 2), dtype=np.int64)
+    count = tests = visited = 0
     for k in range(nodes.shape[0]):
         s, stay, first_child = nodes[k, START], nodes[k, STAY], nodes[k, CHILD]
         for a in range(s, stay):
-            i = perm[a]
-            for b in range(a + 1, stay):
-                tests += 1
-                if overlap(lo, hi, i, perm[b]):
-                    emit(buf, count, i, perm[b])
-                    count += 1
+            count = scan_columns(box, order, a, a + 1, stay, buf, count)
+            tests += stay - a - 1
             if first_child == NO_CHILD:
                 continue
+            ax0, ax1, ay0, ay1 = box[0, a], box[1, a], box[2, a], box[3, a]
             top = 0
             for c in range(4):
                 stack[top] = first_child + c
@@ -138,15 +199,11 @@ def quadtree_pairs(lo, hi, nodes, bounds, perm, buf):
             while top > 0:
                 top -= 1
                 m = stack[top]
-                # Every box in m's subtree lies inside m's closed region.
-                if lo[i, 0] > bounds[m, 2] or hi[i, 0] < bounds[m, 0] or lo[i, 1] > bounds[m, 3] or hi[i, 1] < bounds[m, 1]:
+                if ax0 > bounds[m, 2] or ax1 < bounds[m, 0] or ay0 > bounds[m, 3] or ay1 < bounds[m, 1]:
                     continue
                 visited += 1
-                for b in range(nodes[m, START], nodes[m, STAY]):
-                    tests += 1
-                    if overlap(lo, hi, i, perm[b]):
-                        emit(buf, count, i, perm[b])
-                        count += 1
+                count = scan_columns(box, order, a, nodes[m, START], nodes[m, STAY], buf, count)
+                tests += nodes[m, STAY] - nodes[m, START]
                 if nodes[m, CHILD] != NO_CHILD:
                     for c in range(4):
                         stack[top] = nodes[m, CHILD] + c
@@ -157,65 +214,76 @@ def quadtree_pairs(lo, hi, nodes, bounds, perm, buf):
 class Quadtree(BroadPhase):
     """Region quadtree over the boxes, rebuilt every frame.
 
-    A node splits when its subtree holds more than `capacity` objects and it is shallower than
-    `max_depth`. Objects that straddle a node's middle lines stay in that node, so large objects
-    sit near the root and are tested against everything below them.
+    A node splits when its subtree holds more than `capacity` objects, it is shallower than
+    `max_depth` (at most MAX_DEPTH) and some of its objects fit a child. Objects that straddle a
+    node's middle lines stay in that node, so large objects sit near the root and are tested
+    against everything below them.
     """
 
     name = "own.quadtree"
     # Capacity 32: in two runs of the tuning study over the scene families (docs/TUNING.md),
     # 16 and 32 came within about 8 % of each scene's best capacity on average; 8 was 12-22 % off.
+    # It stayed best of 8..64 (or within noise) on the uniform scene at n = 2048, 2^17 and 2^20.
     defaults = {"capacity": 32, "max_depth": 16}
 
     def __init__(self, **params):
         super().__init__(**params)
         self._capacity = self._int_param("capacity", 1)
         self._max_depth = self._int_param("max_depth", 0)
+        if self._max_depth > MAX_DEPTH:
+            raise ValueError(f"{self.name}: max_depth must be at most {MAX_DEPTH}, got {self._max_depth}")
+        self._collect = PairCollector()
 
     def _reset(self, positions, radii):
-        self._collect = PairCollector()
+        n = self.n
+        # The order is double-buffered (the repair reads last frame's while it writes this
+        # frame's); -1 first: none yet. Every work array is kept between frames.
+        self._order, self._spare_order = np.full(n, -1, dtype=np.int64), np.empty(n, dtype=np.int64)
+        self._work = (np.empty((n, 2)), np.empty(n), np.empty(n, dtype=np.uint64), np.empty(n, dtype=np.int64))
+        self._box = np.empty((4, n))  # by column: scans compare four contiguous runs
         self._update(positions)
 
     def _update(self, positions):
-        self._lo, self._hi, self._nodes, self._bounds, self._perm = quadtree_from(
-            positions, self.radii, self._capacity, self._max_depth
+        self._keys, self._nodes, self._bounds, self._frame, swaps = quadtree_build(
+            positions, self.radii, self._max_depth, self._capacity, self._order, self._spare_order, self._work, self._box
         )
+        self._order, self._spare_order = self._spare_order, self._order
+        self._stats = {"nodes": len(self._nodes), "depth": int(self._nodes[:, DEPTH].max()), "swaps": swaps}
 
     def _pairs(self):
-        out, (tests, visited) = self._collect(quadtree_pairs, self._lo, self._hi, self._nodes, self._bounds, self._perm)
-        self._stats = {"nodes": len(self._nodes), "depth": int(self._nodes[:, DEPTH].max()), "tests": tests, "visited": visited}
+        out, (tests, visited) = self._collect(quadtree_pairs, self._order, self._box, self._nodes, self._bounds)
+        self._stats.update(tests=tests, visited=visited)
         return out
 
     def structure(self):
-        return {"nodes": self._bounds.copy()}
-
-    def _mid(self, k: int) -> tuple[float, float]:
-        x0, y0, x1, y1 = self._bounds[k]
-        return 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+        """Each node's region (its lattice cell) as a rectangle."""
+        x0, y0, size = self._frame
+        side = size / 2.0 ** self._nodes[:, DEPTH]
+        cx, cy = self._nodes[:, CX] * side + x0, self._nodes[:, CY] * side + y0
+        return {"nodes": np.column_stack([cx, cy, cx + side, cy + side])}
 
     def validate(self):
-        nodes, bounds, perm = self._nodes, self._bounds, self._perm
-        assert np.array_equal(np.sort(perm), np.arange(self.n)), "perm is not a permutation"
-        assert tuple(nodes[0, [START, END]]) == (0, self.n), "root does not hold every object"
-        for k, (s, stay, e, depth, child) in enumerate(nodes):
+        nodes, keys, box, n = self._nodes, self._keys, self._box, self.n
+        assert np.array_equal(np.sort(self._order), np.arange(n)), "order is not a permutation"
+        assert (keys[1:] >= keys[:-1]).all(), "keys are not sorted"
+        assert tuple(nodes[0, [START, END]]) == (0, n), "root does not hold every object"
+        level = (keys & np.uint64(LEVEL_MASK)).astype(np.int64)
+        code = keys >> np.uint64(LEVEL_BITS)
+        for k, (s, stay, e, depth, child, cx, cy) in enumerate(nodes):
             assert s <= stay <= e, f"node {k}: slice bounds out of order"
-            ids = perm[s:e]
-            x0, y0, x1, y1 = bounds[k]
-            assert (self._lo[ids, 0] >= x0).all() and (self._hi[ids, 0] <= x1).all() and (
-                self._lo[ids, 1] >= y0).all() and (self._hi[ids, 1] <= y1).all(), f"node {k}: a box leaves its region"
+            shift = np.uint64(2 * (self._max_depth - depth))
+            assert (code[s:e] >> shift == interleave(cx, cy)).all(), f"node {k}: an object is outside its cell"
+            assert (level[s:e] >= depth).all(), f"node {k}: an object belongs higher up"
+            lo_x, hi_x, lo_y, hi_y = box[:, s:e]
+            x0, y0, x1, y1 = self._bounds[k]
+            assert (lo_x >= x0).all() and (hi_x <= x1).all() and (lo_y >= y0).all() and (hi_y <= y1).all(), \
+                f"node {k}: a box leaves its bounds"
             if child == NO_CHILD:
                 assert stay == e, f"leaf {k} has objects outside its own list"
-                assert e - s <= self._capacity or depth >= self._max_depth or all(
-                    child_class(self._lo, self._hi, i, *self._mid(k)) == STRADDLE
-                    for i in perm[s:e]
-                ), f"leaf {k} is over capacity although it could split"
+                assert e - s <= self._capacity or depth >= self._max_depth or (level[s:e] == depth).all(), \
+                    f"leaf {k} is over capacity although it could split"
                 continue
-            mid_x, mid_y = self._mid(k)
-            for a in range(s, e):
-                c = child_class(self._lo, self._hi, perm[a], mid_x, mid_y)
-                if a < stay:
-                    assert c == STRADDLE, f"object {perm[a]} stays in node {k} but fits a child"
-                else:
-                    cs, ce = nodes[child + c, START], nodes[child + c, END]
-                    assert cs <= a < ce, f"object {perm[a]} is not in the child that holds it"
-            assert nodes[child, START] == stay and nodes[child + 3, END] == e, f"node {k}: children do not tile its slice"
+            assert (level[s:stay] == depth).all(), f"node {k}: an object stays although it fits a child"
+            ends = [nodes[child + c, START] for c in range(4)] + [e]
+            assert ends[0] == stay and all(nodes[child + c, END] == ends[c + 1] for c in range(4)), \
+                f"node {k}: children do not tile its slice"

@@ -31,12 +31,18 @@ def sortable_bits(values: np.ndarray) -> np.ndarray:
 
 @nb.njit(cache=True)
 def radix_argsort(keys: np.ndarray) -> np.ndarray:
-    """Stable argsort of uint64 keys. The keys travel with the indices (sequential reads in every
-    pass), and one first pass counts the digits of all passes."""
+    """Stable argsort of uint64 keys."""
+    return radix_sort(keys)[0]
+
+
+@nb.njit(cache=True)
+def radix_sort(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Stable argsort of uint64 keys, and the keys in that order. The keys travel with the indices
+    (sequential reads in every pass), and one first pass counts the digits of all passes."""
     n = keys.shape[0]
     order = np.arange(n, dtype=np.int64)
     if n < 2:
-        return order
+        return order, keys.copy()
     passes = (64 + DIGIT_BITS - 1) // DIGIT_BITS
     mask = np.uint64(BUCKETS - 1)
     count = np.zeros((passes, BUCKETS), dtype=np.int64)
@@ -64,4 +70,4 @@ def radix_argsort(keys: np.ndarray) -> np.ndarray:
             spare_keys[slot] = key
         order, spare = spare, order
         cur_keys, spare_keys = spare_keys, cur_keys
-    return order
+    return order, cur_keys

@@ -1,0 +1,26 @@
+"""Morton (Z-order) codes: the bits of two lattice coordinates interleaved, so that sorting by
+code visits the lattice quadrant by quadrant, recursively (the order of a quadtree's pre-order
+traversal, and what makes objects close in space close in memory)."""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+
+@nb.njit(cache=True, inline="always")
+def _spread(v: np.uint64) -> np.uint64:
+    """The 32 low bits of v moved to the even bit positions (0, 2, 4, ...)."""
+    v &= np.uint64(0xFFFFFFFF)
+    v = (v | (v << np.uint64(16))) & np.uint64(0x0000FFFF0000FFFF)
+    v = (v | (v << np.uint64(8))) & np.uint64(0x00FF00FF00FF00FF)
+    v = (v | (v << np.uint64(4))) & np.uint64(0x0F0F0F0F0F0F0F0F)
+    v = (v | (v << np.uint64(2))) & np.uint64(0x3333333333333333)
+    v = (v | (v << np.uint64(1))) & np.uint64(0x5555555555555555)
+    return v
+
+
+@nb.njit(cache=True, inline="always")
+def interleave(qx, qy) -> np.uint64:
+    """Morton code of lattice point (qx, qy), each below 2^32: x in the even bits, y in the odd."""
+    return _spread(np.uint64(qx)) | (_spread(np.uint64(qy)) << np.uint64(1))
