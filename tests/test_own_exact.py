@@ -75,6 +75,7 @@ def test_exact_across_update_frames(name, params):
     backend.reset(traj.positions[0], traj.scene.radii)
     for f in range(traj.frames):
         backend.update(traj.positions[f])
+        backend.validate()
         got = backend.pairs()
         np.testing.assert_array_equal(np.sort(keys(got, 400)), keys(traj.box_pairs[f], 400))
 
@@ -160,6 +161,31 @@ def test_grid_counts_objects_that_change_cell_the_same_with_or_without_coherence
         moved[coherent] = grid.stats()["moved"]
     assert moved[True] == moved[False]
     assert 0 < moved[True] < 0.05 * 2000  # objects moving 1/6 unit per frame seldom change cell
+
+
+def test_grid_repairs_its_slots_while_few_objects_change_cell_and_counts_afresh_otherwise():
+    rng = np.random.default_rng(4)
+    # Two anchors in opposite corners hold the layout while the others move.
+    base = np.vstack([[0.0, 0.0], [400.0, 400.0], rng.uniform(50, 350, (500, 2))])
+    radii = np.full(len(base), 2.0)
+    grid = engines.create("own.grid")
+    grid.reset(base, radii)
+    cell = grid.stats()["cell"]
+    movers = np.arange(len(base)) >= 2
+    step = np.where(movers[:, None], 0.01, 0.0)
+    frames = [(base + step, 0),  # the first update counts: every object came from nowhere
+              (base + 2 * step, 1),  # a few change cell: repaired
+              (rng.permutation(base), 0),  # every object jumps: the repair gives up midway
+              (base + step, 0),  # they all jump back: counted, as the last frame had many moves
+              (base + 2 * step, 0),  # and this one too, after that frame
+              (base + step, 1),
+              (base + step + np.where(movers[:, None], [0.0, cell], 0.0), 1)]  # all cross a row: starts counted afresh
+    for positions, repaired in frames:
+        grid.update(positions)
+        assert grid.stats()["repaired"] == repaired, grid.stats()
+        assert grid.stats()["relayout"] == 0
+        grid.validate()
+        assert set(map(tuple, grid.pairs().tolist())) == set(map(tuple, brute_pairs(positions, radii).tolist()))
 
 
 @pytest.mark.parametrize("name", ["own.sap_incremental", "own.quadtree"])

@@ -12,6 +12,7 @@ Memory order is what matters at a million objects, so objects are kept in last f
 (with their radii): the counting sort then writes memory almost sequentially, and its only
 scattered reads, the centres, are done in one short loop that keeps many misses in flight. In
 input order instead, the histogram and the scatter jump through memory: 2x slower at n = 2^20.
+While few objects change cell, the slots are not sorted again but repaired in place (grid_repair).
 The cell layout is kept while it still fits the scene, so cells do not shift under objects that
 did not move. Cells are clamped to the layout (monotone in the coordinate), so an object outside
 it is still handled exactly.
@@ -41,6 +42,8 @@ LARGE_RADIUS_IN_MEDIANS = 4.0
 ROUNDING_ULPS = 64
 # Layout as a float array: origin x, y; cell width, height; cells along x, y.
 OX, OY, CW, CH, NX, NY = range(6)
+# A repair of last frame's slot order gives up past this many swaps per object and counting-sorts.
+MAX_SWAPS_PER_OBJECT = 8
 # Slot box columns (boxes are stored in slot order, one row per slot, for sequential scans).
 LX, HX, LY, HY = range(4)
 
@@ -129,13 +132,15 @@ def grid_build(positions, radii, order, last_key, layout, limit, start, key, xy,
     for k in range(n):
         i = order[k]
         xy[k, 0], xy[k, 1] = positions[i, 0], positions[i, 1]
-    moved = 0
+    moved = shifts = 0
     for k in range(n):
         c = cell_of(xy[k, 1], oy, inv_y, last_y) * w + cell_of(xy[k, 0], ox, inv_x, last_x) + 1
         c = c if 2.0 * radii[k] <= limit else large
         key[k] = c
         start[c] += 1
-        moved += c != last_key[k]
+        if c != last_key[k]:
+            moved += 1
+            shifts += abs(c - last_key[k])
     total = 0
     for c in range(large + 2):  # start[c] = end of bucket c (a running sum: no reload per cell)
         total += start[c]
@@ -149,7 +154,7 @@ def grid_build(positions, radii, order, last_key, layout, limit, start, key, xy,
         ids[s], skey[s], sradii[s] = order[k], c, radii[k]
         x, y, r = xy[k, 0], xy[k, 1], radii[k]
         box[s, LX], box[s, HX], box[s, LY], box[s, HY] = x - r, x + r, y - r, y + r
-    return start, moved  # now start[c] = first slot of bucket c
+    return start, moved, shifts  # now start[c] = first slot of bucket c
 
 
 @nb.njit(cache=True)
@@ -203,17 +208,98 @@ def grid_pairs(ids, box, skey, start, layout, limit, buf):
 
 
 @nb.njit(cache=True)
-def grid_update(positions, radii, order, last_key, p, cell, max_cells, layout, start, key, xy, slots):
+def _sort_slots(ids, box, skey, sradii, max_swaps):
+    """Insertion sort of the slots by key, each slot's whole row moving with it; the number of
+    rows moved, or -1 past max_swaps (the slots then still hold every object once)."""
+    swaps = 0
+    for a in range(1, skey.shape[0]):
+        k = skey[a]
+        if skey[a - 1] <= k:
+            continue
+        i, r, lx, hx, ly, hy = ids[a], sradii[a], box[a, LX], box[a, HX], box[a, LY], box[a, HY]
+        b = a - 1
+        while b >= 0 and skey[b] > k:
+            ids[b + 1], skey[b + 1], sradii[b + 1] = ids[b], skey[b], sradii[b]
+            box[b + 1, LX], box[b + 1, HX], box[b + 1, LY], box[b + 1, HY] = box[b, LX], box[b, HX], box[b, LY], box[b, HY]
+            b -= 1
+            swaps += 1
+        ids[b + 1], skey[b + 1], sradii[b + 1] = i, k, r
+        box[b + 1, LX], box[b + 1, HX], box[b + 1, LY], box[b + 1, HY] = lx, hx, ly, hy
+        if swaps > max_swaps:
+            return -1
+    return swaps
+
+
+@nb.njit(cache=True)
+def grid_repair(positions, layout, limit, start, xy, slots):
+    """Last frame's slots (ids, boxes, keys, radii) repaired in place for this frame, in the same
+    layout: the new keys, in last frame's slot order, are almost sorted, so an insertion sort that
+    moves whole rows puts them in order, and each object that changed cell shifts the bucket
+    starts between its old and new key by one. That replaces the counting sort's histogram,
+    prefix sum over every cell and scattered writes into fresh slots: 3x faster at n = 2048,
+    where a few objects change cell per frame.
+
+    Returns (objects that changed cell, repaired); not repaired when the sort would cost more than
+    a counting sort: the slots then hold every object once, in part-sorted order, and `start` is
+    stale."""
+    ids, box, skey, sradii = slots
+    n = ids.shape[0]
+    ox, oy, inv_x, inv_y = layout[OX], layout[OY], 1.0 / layout[CW], 1.0 / layout[CH]
+    w = int(layout[NX]) + 2
+    last_x, last_y = layout[NX] - 1.0, layout[NY] - 1.0
+    large = (int(layout[NY]) + 1) * w
+    for a in range(n):  # the only scattered reads, in a loop of their own (see grid_build)
+        i = ids[a]
+        xy[a, 0], xy[a, 1] = positions[i, 0], positions[i, 1]
+    moved = shifts = 0
+    for a in range(n):
+        x, y, r = xy[a, 0], xy[a, 1], sradii[a]
+        c = cell_of(y, oy, inv_y, last_y) * w + cell_of(x, ox, inv_x, last_x) + 1
+        c = c if 2.0 * r <= limit else large
+        c0 = skey[a]
+        if c != c0:
+            moved += 1
+            shifts += abs(c - c0)
+            if shifts <= start.shape[0]:  # start[c] counts the keys below c
+                if c0 < c:
+                    start[c0 + 1:c + 1] -= 1
+                else:
+                    start[c + 1:c0 + 1] += 1
+            skey[a] = c
+        box[a, LX], box[a, HX], box[a, LY], box[a, HY] = x - r, x + r, y - r, y + r
+    if _sort_slots(ids, box, skey, sradii, MAX_SWAPS_PER_OBJECT * n + 64) < 0:
+        return moved, shifts, False
+    if shifts > start.shape[0]:  # past that, counting the starts afresh costs less than shifting
+        c = 0
+        for a in range(n):
+            while c <= skey[a]:
+                start[c] = a
+                c += 1
+        start[c:] = n
+    return moved, shifts, True
+
+
+@nb.njit(cache=True)
+def grid_update(positions, radii, order, last_key, p, cell, max_cells, layout, start, key, xy, slots, spare, repair):
     """One call per frame (each compiled call from Python costs microseconds): the layout, the
-    small-object limit and the build into `slots` (ids, boxes, keys, radii). Returns (relayout,
-    limit, bucket starts, objects moved)."""
+    small-object limit, and the slots (ids, boxes, keys, radii) for this frame: `slots` repaired in
+    place if `repair` and the layout is kept, else counting-sorted from `order` into `spare`.
+    Returns (relayout, limit, bucket starts, objects moved, keys they crossed, whether `spare` now
+    holds the slots)."""
     extent = centre_extents(positions)
     relayout = grid_layout(extent, positions.shape[0], p, cell, max_cells, layout)
     limit = small_limit(extent, layout)
+    if repair and not relayout:
+        moved, shifts, repaired = grid_repair(positions, layout, limit, start, xy, slots)
+        if repaired:
+            return relayout, limit, start, moved, shifts, False
+        ids, _, skey, sradii = slots  # count afresh from the part-sorted slots
+        start, _, _ = grid_build(positions, sradii, ids, skey, layout, limit, start, key, xy, *spare)
+        return relayout, limit, start, moved, shifts, True
     if relayout:
         last_key = np.full(positions.shape[0], -1, dtype=last_key.dtype)  # cells of another layout
-    start, moved = grid_build(positions, radii, order, last_key, layout, limit, start, key, xy, *slots)
-    return relayout, limit, start, moved
+    start, moved, shifts = grid_build(positions, radii, order, last_key, layout, limit, start, key, xy, *spare)
+    return relayout, limit, start, moved, shifts, True
 
 
 def default_cell(radii: np.ndarray) -> float:
@@ -259,6 +345,7 @@ class UniformGrid(BroadPhase):
         self._scratch = (np.empty(n, dtype=np.int64), np.empty((n, 2)))
         self._start = np.zeros(0, dtype=np.int64)
         self._collect = PairCollector()
+        self._repair = False
         self._update(positions)
 
     def _update(self, positions):
@@ -269,14 +356,19 @@ class UniformGrid(BroadPhase):
         else:  # input order; last frame's cells looked up per object
             order, radii, last_key = np.arange(self.n, dtype=np.int64), self.radii, np.empty_like(key)
             last_key[ids] = key
-        relayout, self._limit, self._start, moved = grid_update(
+        relayout, self._limit, self._start, moved, shifts, rebuilt = grid_update(
             positions, radii, order, last_key, self._p, self._cell, self._max_cells, self._layout,
-            self._start, *self._scratch, self._spare,
+            self._start, *self._scratch, self._slots, self._spare, self._repair,
         )
-        self._slots, self._spare = self._spare, self._slots
+        # Repair next frame while this frame's objects crossed fewer keys than there are: a
+        # repair moves about (keys crossed) x (objects per key) rows, and shifts as many starts.
+        # At n = 2^20, where a row of cells holds 600 objects, counting is 1.4x faster.
+        self._repair = self.params["coherent"] and shifts <= len(self._start)
+        if rebuilt:
+            self._slots, self._spare = self._spare, self._slots
         ncells = int(self._layout[NX] * self._layout[NY])
         self._stats = {"cells": ncells, "cell": float(self._layout[CW]), "large": self.n - int(self._start[self._large_key()]),
-                       "moved": moved, "relayout": int(relayout)}
+                       "moved": moved, "relayout": int(relayout), "repaired": int(not rebuilt)}
 
     def _large_key(self) -> int:
         """Key of the large bucket in grid_build's padded key space."""
