@@ -21,7 +21,7 @@ from scenes.motion import simulate
 from .cli import (Parser, add_scene_options, check_trial_options, command_line, matched_backends, prepare_out,
                   run_cli, run_metadata, scene_from_args, warn_unavailable, write_json)
 from .harness import COLUMNS, Job, run_isolated, scene_columns
-from .summary import add_speedup, format_table, plot_error_vs_time, summarise
+from .summary import add_speedup, format_table, ours_against_engines, plot_error_vs_time, summarise
 
 
 def parse(argv: list[str] | None):
@@ -95,6 +95,9 @@ def main(argv: list[str] | None = None) -> int:
     baseline = add_speedup(table) if not table.empty else None
     print()
     print(format_table(table, baseline) if not table.empty else "no backend produced results")
+    headline = ours_against_engines(table) if not table.empty else None
+    if headline:
+        print(headline)
     print("times: median ±interquartile range over all timed frames and repeats; cand/true: candidates per truly "
           "overlapping pair (1 = no extra work);\nmissed: truly overlapping pairs (and, for 'boxes' backends, "
           "overlapping boxes) absent from the candidates, summed over frames;\nsetup: first build and "

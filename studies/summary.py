@@ -50,6 +50,25 @@ def add_speedup(table: pd.DataFrame, baseline_prefix: str = "essay.") -> str | N
     return fastest
 
 
+# The physics engines' own broad phases (scipy's k-d tree is a library, not an engine).
+ENGINE_FAMILIES = ("chipmunk.", "bullet.", "fcl.", "coal.")
+
+
+def ours_against_engines(table: pd.DataFrame) -> str | None:
+    """One line: our fastest backend against the fastest engine that ran, end to end per frame and
+    on the broad phase alone (update + pairs); None unless both kinds ran."""
+    ours = [b for b in table.index if b.startswith("own.")]
+    engines = [b for b in table.index if b.startswith(ENGINE_FAMILIES)]
+    if not ours or not engines:
+        return None
+    best, engine = (min(names, key=lambda b: table.loc[b, "total_ms"]) for names in (ours, engines))
+    ours_ms, engine_ms = table.loc[best, "total_ms"], table.loc[engine, "total_ms"]
+    broad = (table.loc[engine, "update_ms"] + table.loc[engine, "pairs_ms"]) / (
+        table.loc[best, "update_ms"] + table.loc[best, "pairs_ms"])
+    return (f"our fastest, {best} ({ours_ms:.3f} ms per frame), against the fastest engine, {engine} "
+            f"({engine_ms:.3f} ms): {engine_ms / ours_ms:.1f}x end to end, {broad:.1f}x on update + pairs")
+
+
 def _ms(value: float, spread: float) -> str:
     return f"{value:9.3f} ±{spread:<7.3f}" if value < 100 else f"{value:9.1f} ±{spread:<7.1f}"
 
