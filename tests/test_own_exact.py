@@ -31,6 +31,7 @@ EXACT = [
     ("own.quadtree", {}),
     ("own.quadtree", {"capacity": 1}),
     ("own.quadtree", {"capacity": 2, "max_depth": 3}),
+    ("own.quadtree", {"max_depth": 0}),  # one node: the lattice is a single cell
     ("own.bvh", {}),
     ("own.bvh", {"leaf_size": 1}),
 ]

@@ -10,7 +10,6 @@ import numba as nb
 import numpy as np
 
 
-
 @nb.njit(cache=True)
 def boxes(positions: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Lower and upper corners (n, 2) of the circles' axis-aligned boxes."""
@@ -99,7 +98,7 @@ def scan_boxes(box, ids, a, s, e, buf, count):
 def scan_columns(cols, ids, a, s, e, buf, count):
     """scan_boxes for boxes stored by column (rows lx, hx, ly, hy of a (4, n) array): the hits in
     s..e-1 are counted first by a loop over slices, which the compiler vectorises, and only a scan
-    with a hit is walked again to emit. Measured 1.7x faster than scan_boxes over 25 boxes, 1.2x
+    with a hit is walked again to emit. Measured 2x faster than scan_boxes over 25 boxes, 1.15x
     over a quadtree's leaves (where most scans find nothing)."""
     lx, hx, ly, hy = cols[0, s:e], cols[1, s:e], cols[2, s:e], cols[3, s:e]
     ax0, ax1, ay0, ay1 = cols[0, a], cols[1, a], cols[2, a], cols[3, a]

@@ -236,8 +236,9 @@ def grid_repair(positions, layout, limit, start, xy, slots):
     layout: the new keys, in last frame's slot order, are almost sorted, so an insertion sort that
     moves whole rows puts them in order, and each object that changed cell shifts the bucket
     starts between its old and new key by one. That replaces the counting sort's histogram,
-    prefix sum over every cell and scattered writes into fresh slots: 3x faster at n = 2048,
-    where a few objects change cell per frame.
+    prefix sum over every cell and scattered writes into fresh slots: 10-20 us against 30-40 us
+    at n = 2048, where a few objects change cell per frame, and 2.3-3.0 against 3.2-3.4 ms at
+    n = 131072.
 
     Returns (objects that changed cell, repaired); not repaired when the sort would cost more than
     a counting sort: the slots then hold every object once, in part-sorted order, and `start` is

@@ -3,26 +3,27 @@
 Regions are the cells of a 2^D x 2^D lattice over the square around all boxes (D = max_depth).
 A box's corners are quantised to lattice steps, and its cell at depth d is given by the top d
 bits of both corners' steps, as long as they agree there. Each object's key is the Morton code
-of its deepest such cell, then that depth; sorting the keys (a radix sort) gives the tree's
-pre-order, with each node's own objects before its four children's subtrees. So every node is
-one contiguous slice of the sorted objects, and the children's slices are found by binary search
-on the keys, instead of moving the objects level by level (Gargantini's linear quadtree).
+of its deepest such cell, then that depth; the keys in sorted order are the tree's pre-order,
+with each node's own objects before its four children's subtrees. So every node is one
+contiguous slice of the sorted objects, and the children's slices are found by binary search on
+the keys, instead of moving the objects level by level (Gargantini's linear quadtree). Objects
+are kept in last frame's order, where their new keys are almost sorted: an insertion sort
+repairs them (a radix sort when too many changed places).
 
 Quantising is monotone in the coordinate, so boxes whose steps lie in different cells of one
 depth cannot touch: pairs are found only between an object and the later objects of its own node
 and of the nodes below it. Node bounds are the exact float64 union of the boxes below them, so
-pruning never loses a pair; the boxes are stored in sorted order, one row each, so that every
-scan reads memory in sequence.
+pruning never loses a pair; the boxes are stored in sorted order, by column, so that every scan
+reads four contiguous runs.
 """
 
 from __future__ import annotations
 
 import numba as nb
 import numpy as np
+from numba.cpython.unsafe.numbers import leading_zeros
 
 from engines.base import BroadPhase
-
-from numba.cpython.unsafe.numbers import leading_zeros
 
 from .common import PairCollector, gather, insertion_sort, scan_columns
 from .morton import interleave
