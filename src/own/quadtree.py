@@ -222,9 +222,9 @@ class Quadtree(BroadPhase):
     """
 
     name = "own.quadtree"
-    # Capacity 32: in two runs of the tuning study over the scene families (docs/TUNING.md),
-    # 16 and 32 came within about 8 % of each scene's best capacity on average; 8 was 12-22 % off.
-    # It stayed best of 8..64 (or within noise) on the uniform scene at n = 2048, 2^17 and 2^20.
+    # Capacity 32: in the tuning study over the scene families (docs/TUNING.md, n = 1024 and
+    # 8192), 16 and 32 came within 10-14 % of each scene's best capacity on average, 8 was 23 %
+    # off; on the uniform scene at n = 2048, 2^17 and 2^20, 32 was best of 8..64 or within noise.
     defaults = {"capacity": 32, "max_depth": 16}
 
     def __init__(self, **params):
