@@ -249,7 +249,8 @@ class Quadtree(BroadPhase):
             positions, self.radii, self._max_depth, self._capacity, self._order, self._spare_order, self._work, self._box
         )
         self._order, self._spare_order = self._spare_order, self._order
-        self._stats = {"nodes": len(self._nodes), "depth": int(self._nodes[:, DEPTH].max()), "swaps": swaps}
+        # Nodes are breadth first, so the last one is among the deepest.
+        self._stats = {"nodes": len(self._nodes), "depth": int(self._nodes[-1, DEPTH]), "swaps": swaps}
 
     def _pairs(self):
         out, (tests, visited) = self._collect(quadtree_pairs, self._order, self._box, self._nodes, self._bounds)
