@@ -37,6 +37,7 @@ DISTS = ("uniform", "clusters")
 COMPILE_PROBE = """
 import time
 start = time.perf_counter()
+import engines
 from scenes import generate
 scene = generate("uniform", 256, seed=0)
 for name in ("own.sap", "own.sap_incremental", "own.sap_parallel", "own.grid", "own.quadtree", "own.bvh"):
@@ -48,15 +49,19 @@ print(time.perf_counter() - start)
 """
 
 
-def compile_times() -> dict[str, float]:
-    """Seconds to import and JIT-compile our kernels into an empty cache, then again from it."""
+def compile_times() -> dict[str, float | str]:
+    """Seconds to import and JIT-compile our kernels into an empty cache, then again from it; with
+    "error", the last line of what a failed probe printed."""
     with tempfile.TemporaryDirectory() as cache:
         env = {**os.environ, "NUMBA_CACHE_DIR": cache}
-        times = {}
+        times: dict[str, float | str] = {}
         for kind in ("cold", "warm"):
             done = subprocess.run([sys.executable, "-c", COMPILE_PROBE], env=env, capture_output=True, text=True,
                                   timeout=600)
-            times[f"{kind}_s"] = float(done.stdout.strip().splitlines()[-1]) if done.returncode == 0 else float("nan")
+            if done.returncode != 0:
+                times["error"] = (done.stderr.strip().splitlines() or [f"exit status {done.returncode}"])[-1]
+                return {"cold_s": float("nan"), "warm_s": float("nan"), **times}
+            times[f"{kind}_s"] = float(done.stdout.strip().splitlines()[-1])
     return times
 
 
@@ -149,8 +154,11 @@ def main(argv: list[str] | None = None) -> int:
         last = d.iloc[-1]
         print(f"{backend:<20} {dist:<9} {int(last.n):>10} {last.ms:>16.3f} {exponents[(dist, backend)]:>7.2f} "
               f"{last.peak_mb:>8.0f}" + (f"   stopped at {stopped[(dist, backend)]}" if (dist, backend) in stopped else ""))
-    print(f"\nnumba compile of our kernels: {compile_s['cold_s']:.1f} s with an empty cache, "
-          f"{compile_s['warm_s']:.2f} s from the cache (process start and imports included)")
+    if "error" in compile_s:
+        print(f"\nnumba compile of our kernels: NOT MEASURED, the probe failed: {compile_s['error']}")
+    else:
+        print(f"\nnumba compile of our kernels: {compile_s['cold_s']:.1f} s with an empty cache, "
+              f"{compile_s['warm_s']:.2f} s from the cache (process start and imports included)")
     write_json(out / "meta.json", run_metadata(command_line("scale", argv), {
         "compile": compile_s, "stopped": {f"{d} {b}": s for (d, b), s in stopped.items()},
         "exponents": {f"{d} {b}": e for (d, b), e in exponents.items()}, "unavailable": missing,
