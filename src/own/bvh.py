@@ -19,7 +19,7 @@ import numpy as np
 from engines.base import BroadPhase
 
 from .common import PairCollector, centre_extents, scan_boxes
-from .morton import interleave
+from .morton import bit_length, interleave
 from .radix import radix_sort
 
 MORTON_BITS = 16  # per axis: 2^16 lattice steps over the centres' extent
@@ -52,10 +52,7 @@ def _split(codes, first, last):
     diff = codes[first] ^ codes[last]
     if diff == 0:
         return (first + last) >> 1
-    high = np.uint64(1)
-    while diff >> np.uint64(1):  # isolate the highest set bit (at most 32 steps)
-        diff >>= np.uint64(1)
-        high <<= np.uint64(1)
+    high = np.uint64(1) << np.uint64(bit_length(diff) - 1)
     lo, hi = first, last  # invariant: codes[lo] has the bit off, codes[hi] has it on
     while hi - lo > 1:  # the codes share every bit above it, so it alone orders them
         mid = (lo + hi) >> 1

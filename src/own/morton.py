@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numba as nb
 import numpy as np
+from numba.cpython.unsafe.numbers import leading_zeros  # numba's count-leading-zeros intrinsic
 
 
 @nb.njit(cache=True, inline="always")
@@ -24,3 +25,9 @@ def _spread(v: np.uint64) -> np.uint64:
 def interleave(qx, qy) -> np.uint64:
     """Morton code of lattice point (qx, qy), each below 2^32: x in the even bits, y in the odd."""
     return _spread(np.uint64(qx)) | (_spread(np.uint64(qy)) << np.uint64(1))
+
+
+@nb.njit(cache=True, inline="always")
+def bit_length(v) -> int:
+    """Number of bits of v (0 for 0): one instruction, where a shifting loop takes up to 64 steps."""
+    return 64 - leading_zeros(np.uint64(v))

@@ -21,12 +21,11 @@ from __future__ import annotations
 
 import numba as nb
 import numpy as np
-from numba.cpython.unsafe.numbers import leading_zeros
 
 from engines.base import BroadPhase
 
 from .common import PairCollector, gather, insertion_sort, scan_columns
-from .morton import interleave
+from .morton import bit_length, interleave
 from .radix import radix_sort
 
 # Keys are (Morton code of the cell, padded to depth D) << LEVEL_BITS | depth: 2 D + 5 bits.
@@ -73,7 +72,7 @@ def quadtree_keys(xy, sr, depth, x0, y0, size, keys):
         qlx, qhx = int(min(((x - r) - x0) * scale, top)), int(min(((x + r) - x0) * scale, top))
         qly, qhy = int(min(((y - r) - y0) * scale, top)), int(min(((y + r) - y0) * scale, top))
         # The box straddles a cell line at every level below the highest bit where its corners differ.
-        level = depth - (64 - leading_zeros(np.uint64((qlx ^ qhx) | (qly ^ qhy))))
+        level = depth - bit_length((qlx ^ qhx) | (qly ^ qhy))
         mask = -1 << (depth - level)
         keys[a] = (interleave(qlx & mask, qly & mask) << np.uint64(LEVEL_BITS)) | np.uint64(level)
 
