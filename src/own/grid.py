@@ -377,9 +377,8 @@ class UniformGrid(BroadPhase):
         self._repair = self.params["coherent"] and shifts <= len(self._start)
         if rebuilt:
             self._slots, self._spare = self._spare, self._slots
-        ncells = int(self._layout[NX] * self._layout[NY])
-        self._stats = {"cells": ncells, "cell": float(self._layout[CW]), "large": self.n - int(self._start[self._large_key()]),
-                       "moved": moved, "relayout": int(relayout), "repaired": int(not rebuilt)}
+        # Kept raw, made a dict only when asked: building it every frame costs 4% of a frame at n = 2048.
+        self._counters = {"moved": moved, "relayout": int(relayout), "repaired": int(not rebuilt)}
 
     def _large_key(self) -> int:
         """Key of the large bucket in grid_build's padded key space."""
@@ -388,8 +387,12 @@ class UniformGrid(BroadPhase):
     def _pairs(self):
         ids, box, key, _ = self._slots
         out, (tests,) = self._collect(grid_pairs, ids, box, key, self._start, self._layout, self._limit)
-        self._stats["tests"] = tests
+        self._counters["tests"] = tests
         return out
+
+    def stats(self):
+        return {"cells": int(self._layout[NX] * self._layout[NY]), "cell": float(self._layout[CW]),
+                "large": self.n - int(self._start[self._large_key()]), **self._counters}
 
     def structure(self):
         nx, ny = int(self._layout[NX]), int(self._layout[NY])
