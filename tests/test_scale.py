@@ -10,7 +10,7 @@ from pathlib import Path
 import pandas as pd
 
 from own.parallel import threads
-from studies.scale import growth_exponent
+from studies.scale import growth_exponent, ours_against_engines
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -18,6 +18,19 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_growth_exponent_of_a_power_law():
     n = pd.Series([2**k for k in range(6, 16)])
     assert abs(growth_exponent(pd.DataFrame({"n": n, "ms": 3e-4 * n**1.5})) - 1.5) < 1e-9
+
+
+def test_ours_against_engines_picks_the_fastest_of_each_kind_where_both_ran():
+    medians = pd.DataFrame({
+        "dist": ["uniform"] * 5,
+        "n": [64, 64, 64, 128, 128],
+        "backend": ["own.grid", "own.sap", "chipmunk.bbtree", "own.grid", "essay.sap"],
+        "ms": [0.5, 0.2, 3.0, 1.0, 9.0],
+    })
+    versus = ours_against_engines(medians)
+    # n = 128 has no engine (essay.sap is not one), so only n = 64 is compared.
+    assert versus.to_dict("records") == [{"dist": "uniform", "n": 64, "ours": "own.sap", "ours_ms": 0.2,
+                                          "engine": "chipmunk.bbtree", "engine_ms": 3.0, "ratio": 3.0 / 0.2}]
 
 
 def test_scale_study_quick(tmp_path):
@@ -34,6 +47,8 @@ def test_scale_study_quick(tmp_path):
                          r".* numba's own start-up of (\S+) s", done.stdout)
     assert compiled and all(float(t) > 0 for t in compiled.groups()), done.stdout[-1000:]
     assert (out / "scale.png").stat().st_size > 10_000
+    report = (out / "SCALE.md").read_text()  # a partial run reports beside its results, not in docs/
+    assert "| own.grid | uniform | 2048 |" in report and "No n where one of ours and an engine both ran." in report
 
 
 def test_bench_quick_prints_the_targets():
