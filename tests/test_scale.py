@@ -10,7 +10,7 @@ from pathlib import Path
 import pandas as pd
 
 from own.parallel import threads
-from studies.scale import growth_exponent, ours_against_engines
+from studies.scale import growth_exponent, ours_against_engines_per_n
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -27,7 +27,7 @@ def test_ours_against_engines_picks_the_fastest_of_each_kind_where_both_ran():
         "backend": ["own.grid", "own.sap", "chipmunk.bbtree", "own.grid", "essay.sap"],
         "ms": [0.5, 0.2, 3.0, 1.0, 9.0],
     })
-    versus = ours_against_engines(medians)
+    versus = ours_against_engines_per_n(medians)
     # n = 128 has no engine (essay.sap is not one), so only n = 64 is compared.
     assert versus.to_dict("records") == [{"dist": "uniform", "n": 64, "ours": "own.sap", "ours_ms": 0.2,
                                           "engine": "chipmunk.bbtree", "engine_ms": 3.0, "ratio": 3.0 / 0.2}]
@@ -49,6 +49,15 @@ def test_scale_study_quick(tmp_path):
     assert (out / "scale.png").stat().st_size > 10_000
     report = (out / "SCALE.md").read_text()  # a partial run reports beside its results, not in docs/
     assert "| own.grid | uniform | 2048 |" in report and "No n where one of ours and an engine both ran." in report
+    assert "interrupted" not in report
+    # An interrupted run keeps its rows in results.partial.csv; --report-only reports on them, and says so.
+    (out / "results.csv").rename(out / "results.partial.csv")
+    (out / "SCALE.md").unlink()
+    again = subprocess.run([sys.executable, "-m", "studies.scale", "--report-only", "--out", str(out)], cwd=ROOT,
+                           capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stderr[-3000:]
+    assert "INTERRUPTED RUN: the rows end at clusters n = 2048" in again.stdout
+    assert "From an interrupted run" in (out / "SCALE.md").read_text()
 
 
 def test_bench_quick_prints_the_targets():

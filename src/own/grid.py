@@ -342,6 +342,7 @@ class UniformGrid(BroadPhase):
             self._int_param("p", 1)
         if cell is not None and not (np.isfinite(cell) and cell > 0):
             raise ValueError(f"own.grid: cell must be a positive finite size, got {cell!r}")
+        self._counters: dict[str, int] = {}
 
     def _reset(self, positions, radii):
         self._cell = float(self.params["cell"]) if self.params["cell"] is not None else default_cell(radii)
@@ -391,6 +392,8 @@ class UniformGrid(BroadPhase):
         return out
 
     def stats(self):
+        if not self._counters:  # nothing built yet
+            return {}
         return {"cells": int(self._layout[NX] * self._layout[NY]), "cell": float(self._layout[CW]),
                 "large": self.n - int(self._start[self._large_key()]), **self._counters}
 
