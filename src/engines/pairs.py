@@ -56,22 +56,10 @@ def is_canonical(pairs: np.ndarray, n: int) -> str | None:
 
 
 @nb.njit(cache=True)
-def circles_overlap(positions: np.ndarray, radii: np.ndarray, pairs: np.ndarray) -> np.ndarray:
-    """The exact narrow phase shared by every backend: distance <= r_i + r_j (touching counts)."""
-    hit = np.empty(pairs.shape[0], dtype=np.bool_)
-    for k in range(pairs.shape[0]):
-        i, j = pairs[k, 0], pairs[k, 1]
-        dx = positions[j, 0] - positions[i, 0]
-        dy = positions[j, 1] - positions[i, 1]
-        reach = radii[i] + radii[j]
-        hit[k] = dx * dx + dy * dy <= reach * reach
-    return hit
-
-
-@nb.njit(cache=True)
-def _overlapping(positions: np.ndarray, radii: np.ndarray, pairs: np.ndarray) -> np.ndarray:
-    """The rows of `pairs` whose circles overlap (circles_overlap's test), in one compiled pass:
-    numpy's boolean indexing of the (m, 2) rows cost twice the test itself at n = 2048."""
+def narrow_phase(positions: np.ndarray, radii: np.ndarray, pairs: np.ndarray) -> PairArray:
+    """The exact narrow phase shared by every backend: the candidate pairs whose circles truly
+    overlap, distance <= r_i + r_j (touching counts). The rows are gathered in the same pass as
+    the test: numpy's boolean indexing of them cost twice the test itself at n = 2048."""
     out = np.empty((pairs.shape[0], 2), dtype=pairs.dtype)
     count = 0
     for k in range(pairs.shape[0]):
@@ -82,8 +70,3 @@ def _overlapping(positions: np.ndarray, radii: np.ndarray, pairs: np.ndarray) ->
         out[count, 0], out[count, 1] = i, j  # kept only if the circles overlap (branch-free)
         count += dx * dx + dy * dy <= reach * reach
     return out[:count]
-
-
-def narrow_phase(positions: np.ndarray, radii: np.ndarray, pairs: np.ndarray) -> PairArray:
-    """The candidate pairs whose circles truly overlap."""
-    return _overlapping(positions, radii, pairs)
