@@ -24,6 +24,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from own.grid import MAX_CELLS_PER_OBJECT  # noqa: E402
 from scenes import generate  # noqa: E402
 from scenes.motion import simulate  # noqa: E402
 
@@ -250,7 +251,7 @@ def write_tuning_md(table: pd.DataFrame, curves: pd.DataFrame, path: Path, args)
         "",
         "The rules (in `src/own/`):",
         "- `own.grid`: cell = one diameter of the largest radius, capped at 4 median radii, then",
-        "  enlarged until there are at most 4 cells per object (`default_cell`, `MAX_CELLS_PER_OBJECT`).",
+        f"  enlarged until there are at most {MAX_CELLS_PER_OBJECT} cells per object (`default_cell`, `MAX_CELLS_PER_OBJECT`).",
         "- `own.quadtree`: capacity 32, maximum depth 16.",
         "- `own.sap`: the axis along which the centres vary most.",
         "",

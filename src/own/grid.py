@@ -30,10 +30,11 @@ from engines.base import BroadPhase
 from .common import PairCollector, centre_extents, emit, scan_boxes
 
 # The grid has at most this many cells per object (cells are enlarged to fit), so tiny radii in a
-# huge box cannot allocate an unbounded grid. On the uniform r = 10 scene at the essay's density
-# 4 lets the default one-diameter cell grow only to 25: a quarter of the pair tests of 1 cell
-# per object, measured 2x faster pair search at n = 2048 and 1.6x at n = 2^20.
-MAX_CELLS_PER_OBJECT = 4
+# huge box cannot allocate an unbounded grid. The cap should rarely bind at useful densities: at
+# the essay's (r = 10), one-diameter cells make 4.9 cells per object, and a cap of 4, which
+# enlarged them to 1.25 diameters, cost 1.5x the pair tests: 12% slower per frame at n = 2048,
+# 18% on the clustered scene, the same at n = 131072. 8 was nowhere slower than 4 (r = 1..25).
+MAX_CELLS_PER_OBJECT = 8
 # The default cell is one diameter of this reference radius, capped at 4 median radii so that a
 # few huge objects go to the large bucket instead of coarsening the whole grid.
 LARGE_RADIUS_IN_MEDIANS = 4.0
@@ -223,38 +224,51 @@ def grid_pairs(ids, box, skey, start, layout, limit, buf):
     return count, tests
 
 
+@nb.njit(cache=True, inline="always")
+def _insert_slot(ids, box, skey, sradii, a):
+    """Move slot a's whole row back past the slots with a larger key; returns the rows moved."""
+    k = skey[a]
+    i, r, lx, hx, ly, hy = ids[a], sradii[a], box[a, LX], box[a, HX], box[a, LY], box[a, HY]
+    b = a - 1
+    while b >= 0 and skey[b] > k:
+        ids[b + 1], skey[b + 1], sradii[b + 1] = ids[b], skey[b], sradii[b]
+        box[b + 1, LX], box[b + 1, HX], box[b + 1, LY], box[b + 1, HY] = box[b, LX], box[b, HX], box[b, LY], box[b, HY]
+        b -= 1
+    ids[b + 1], skey[b + 1], sradii[b + 1] = i, k, r
+    box[b + 1, LX], box[b + 1, HX], box[b + 1, LY], box[b + 1, HY] = lx, hx, ly, hy
+    return a - 1 - b
+
+
 @nb.njit(cache=True)
-def _sort_slots(ids, box, skey, sradii, max_swaps):
-    """Insertion sort of the slots by key, each slot's whole row moving with it; the number of
-    rows moved, or -1 past max_swaps (the slots then still hold every object once)."""
+def _sort_slots(ids, box, skey, sradii, descents, max_swaps):
+    """Insertion sort of the slots by key, each slot's whole row moving with it, given the slots
+    whose key is below their predecessor's (`descents`, ascending): between two of them the keys
+    already ascend, so only the descents and the slots after each one that fall out of order as it
+    moves need inserting, not a pass over every slot. Returns the rows moved, or -1 past
+    max_swaps (the slots then still hold every object once)."""
+    n = skey.shape[0]
     swaps = 0
-    for a in range(1, skey.shape[0]):
-        k = skey[a]
-        if skey[a - 1] <= k:
-            continue
-        i, r, lx, hx, ly, hy = ids[a], sradii[a], box[a, LX], box[a, HX], box[a, LY], box[a, HY]
-        b = a - 1
-        while b >= 0 and skey[b] > k:
-            ids[b + 1], skey[b + 1], sradii[b + 1] = ids[b], skey[b], sradii[b]
-            box[b + 1, LX], box[b + 1, HX], box[b + 1, LY], box[b + 1, HY] = box[b, LX], box[b, HX], box[b, LY], box[b, HY]
-            b -= 1
-            swaps += 1
-        ids[b + 1], skey[b + 1], sradii[b + 1] = i, k, r
-        box[b + 1, LX], box[b + 1, HX], box[b + 1, LY], box[b + 1, HY] = lx, hx, ly, hy
-        if swaps > max_swaps:
-            return -1
+    done = 1  # the slots below `done` are in order
+    for d in descents:
+        a = max(d, done)
+        while a < n and skey[a] < skey[a - 1]:
+            swaps += _insert_slot(ids, box, skey, sradii, a)
+            if swaps > max_swaps:
+                return -1
+            a += 1
+        done = a
     return swaps
 
 
 @nb.njit(cache=True)
-def grid_repair(positions, layout, limit, start, xy, slots):
+def grid_repair(positions, layout, limit, start, xy, descents, slots):
     """Last frame's slots (ids, boxes, keys, radii) repaired in place for this frame, in the same
     layout: the new keys, in last frame's slot order, are almost sorted, so an insertion sort that
     moves whole rows puts them in order, and each object that changed cell shifts the bucket
     starts between its old and new key by one. That replaces the counting sort's histogram,
     prefix sum over every cell and scattered writes into fresh slots: 10-20 us against 30-40 us
     at n = 2048, where a few objects change cell per frame, and 2.3-3.0 against 3.2-3.4 ms at
-    n = 131072.
+    n = 131072. `descents` is scratch for the slots that fall out of order (n of them at most).
 
     Returns (objects that changed cell, repaired); not repaired when the sort would cost more than
     a counting sort: the slots then hold every object once, in part-sorted order, and `start` is
@@ -263,7 +277,7 @@ def grid_repair(positions, layout, limit, start, xy, slots):
     n = ids.shape[0]
     space = key_space(layout)
     gather_centres(positions, ids, xy)
-    moved = shifts = 0
+    moved = shifts = found = 0
     for a in range(n):
         x, y, r = xy[a, 0], xy[a, 1], sradii[a]
         c = cell_key(x, y, r, limit, space)
@@ -272,13 +286,14 @@ def grid_repair(positions, layout, limit, start, xy, slots):
             moved += 1
             shifts += abs(c - c0)
             if shifts <= start.shape[0]:  # start[c] counts the keys below c
-                if c0 < c:
-                    start[c0 + 1:c + 1] -= 1
-                else:
-                    start[c + 1:c0 + 1] += 1
+                for k in range(min(c0, c) + 1, max(c0, c) + 1):
+                    start[k] += 1 if c < c0 else -1
             skey[a] = c
+        # Branch-free: every slot is written as a descent, which only a key below the last one's keeps.
+        descents[found] = a
+        found += (a > 0) and (c < skey[a - 1])
         box[a, LX], box[a, HX], box[a, LY], box[a, HY] = x - r, x + r, y - r, y + r
-    if _sort_slots(ids, box, skey, sradii, MAX_SWAPS_PER_OBJECT * n + 64) < 0:
+    if _sort_slots(ids, box, skey, sradii, descents[:found], MAX_SWAPS_PER_OBJECT * n + 64) < 0:
         return moved, shifts, False
     if shifts > start.shape[0]:  # past that, counting the starts afresh costs less than shifting
         c = 0
@@ -301,7 +316,7 @@ def grid_update(positions, radii, order, last_key, p, cell, max_cells, layout, s
     relayout = grid_layout(extent, positions.shape[0], p, cell, max_cells, layout)
     limit = small_limit(extent, layout)
     if repair and not relayout:
-        moved, shifts, repaired = grid_repair(positions, layout, limit, start, xy, slots)
+        moved, shifts, repaired = grid_repair(positions, layout, limit, start, xy, key, slots)
         if repaired:
             return relayout, limit, start, moved, shifts, False
         ids, _, skey, sradii = slots  # count afresh from the part-sorted slots
