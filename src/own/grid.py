@@ -398,7 +398,7 @@ class UniformGrid(BroadPhase):
 
     def _large_key(self) -> int:
         """Key of the large bucket in grid_build's padded key space."""
-        return int((self._layout[NY] + 1) * (self._layout[NX] + 2))
+        return int(key_space(self._layout)[-1])
 
     def _pairs(self):
         ids, box, key, _ = self._slots
