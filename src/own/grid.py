@@ -289,7 +289,7 @@ def grid_repair(positions, layout, limit, start, xy, descents, slots):
                 for k in range(min(c0, c) + 1, max(c0, c) + 1):
                     start[k] += 1 if c < c0 else -1
             skey[a] = c
-        # Branch-free: every slot is written as a descent, which only a key below the last one's keeps.
+        # Every slot is written at the end of the list; only a descent (a key below the one before) keeps it.
         descents[found] = a
         found += (a > 0) and (c < skey[a - 1])
         box[a, LX], box[a, HX], box[a, LY], box[a, HY] = x - r, x + r, y - r, y + r
