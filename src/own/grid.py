@@ -27,7 +27,7 @@ import numpy as np
 
 from engines.base import BroadPhase
 
-from .common import PairCollector, centre_extents, emit, scan_boxes
+from .common import PairCollector, centre_extents, emit
 
 # The grid has at most this many cells per object (cells are enlarged to fit), so tiny radii in a
 # huge box cannot allocate an unbounded grid. The cap should rarely bind at useful densities: at
@@ -45,8 +45,6 @@ ROUNDING_ULPS = 64
 OX, OY, CW, CH, NX, NY = range(6)
 # A repair of last frame's slot order gives up past this many swaps per object and counting-sorts.
 MAX_SWAPS_PER_OBJECT = 8
-# Slot box columns (boxes are stored in slot order, one row per slot, for sequential scans).
-LX, HX, LY, HY = range(4)
 
 
 @nb.njit(cache=True, inline="always")
@@ -76,7 +74,8 @@ def cell_key(x, y, r, limit, space):
 @nb.njit(cache=True, inline="always")
 def gather_centres(positions, order, xy):
     """Centres in `order`: the only scattered reads, in a loop so short that the CPU keeps many
-    cache misses in flight (3x faster at n = 2^20 than computing keys in the same loop)."""
+    cache misses in flight (3x faster at n = 2^20 than computing keys in the same loop; taking
+    the extent in it too, a chain of min and max through every load, made it 1.5x slower)."""
     for k in range(order.shape[0]):
         i = order[k]
         xy[k, 0], xy[k, 1] = positions[i, 0], positions[i, 1]
@@ -132,27 +131,26 @@ def small_limit(extent, layout):
 
 
 @nb.njit(cache=True)
-def grid_build(positions, radii, order, last_key, layout, limit, start, key, xy, ids, box, skey, sradii):
+def grid_build(xy, radii, order, last_key, layout, limit, start, key, ids, centres, skey, sradii):
     """Counting sort of objects into cells (large ones into the last bucket), stable in `order`.
 
     Keys live in a padded key space: rows of nx + 2 cells (an empty column on each side) and one
     empty row on top, so the pair search needs no edge cases (each costs a branch per object).
     Cell (cx, cy) has key cy * (nx + 2) + cx + 1; the large bucket has key (ny + 1) * (nx + 2).
-    `radii` and `last_key` are per slot of `order` (last frame's slot radii and keys, or the
-    input radii and -1s). Fills slot ids, boxes (n, 4), keys and radii; `key` and `xy` are
-    scratch. Every array is the caller's, reused from frame to frame: fresh ones would cost a page
-    fault per 4 KiB, at large n more than the sort.
+    `xy`, `radii` and `last_key` are per slot of `order` (this frame's centres, gathered; last
+    frame's slot radii and keys, or the input radii and -1s). Fills slot ids, centres (n, 2), keys
+    and radii; `key` is scratch. Every array is the caller's, reused from frame to frame: fresh
+    ones would cost a page fault per 4 KiB, at large n more than the sort.
     Returns (bucket starts, objects that changed cell): bucket k holds slots start[k]:start[k + 1];
     `start` is reused when it has the size of this layout's key space.
     """
-    n = positions.shape[0]
+    n = order.shape[0]
     space = key_space(layout)
     large = space[-1]
     if start.shape[0] == large + 2:
         start[:] = 0
     else:
         start = np.zeros(large + 2, dtype=start.dtype)
-    gather_centres(positions, order, xy)
     moved = shifts = 0
     for k in range(n):
         c = cell_key(xy[k, 0], xy[k, 1], radii[k], limit, space)
@@ -172,13 +170,25 @@ def grid_build(positions, radii, order, last_key, layout, limit, start, key, xy,
         s = start[c] - 1
         start[c] = s
         ids[s], skey[s], sradii[s] = order[k], c, radii[k]
-        x, y, r = xy[k, 0], xy[k, 1], radii[k]
-        box[s, LX], box[s, HX], box[s, LY], box[s, HY] = x - r, x + r, y - r, y + r
+        centres[s, 0], centres[s, 1] = xy[k, 0], xy[k, 1]
     return start, moved, shifts  # now start[c] = first slot of bucket c
 
 
+@nb.njit(cache=True, inline="always")
+def scan_circles(centres, radii, ids, a, s, e, buf, count):
+    """common.scan_boxes for slots that hold centres and radii: each box is bounded as everywhere
+    (x - r, x + r), a few flops that cost less than moving boxes twice the size through memory."""
+    x, y, r = centres[a, 0], centres[a, 1], radii[a]
+    ax0, ax1, ay0, ay1, i = x - r, x + r, y - r, y + r, ids[a]
+    for b in range(s, e):
+        emit(buf, count, i, ids[b])
+        x, y, r = centres[b, 0], centres[b, 1], radii[b]
+        count += (max(ax0, x - r) <= min(ax1, x + r)) & (max(ay0, y - r) <= min(ay1, y + r))
+    return count
+
+
 @nb.njit(cache=True)
-def grid_pairs(ids, box, skey, start, layout, limit, buf):
+def grid_pairs(ids, centres, sradii, skey, start, layout, limit, buf):
     """Box-overlap pairs into buf, each once; returns (pairs found, pair tests)."""
     n = ids.shape[0]
     ox, oy, inv_x, inv_y, last_x, last_y, w, large = key_space(layout)
@@ -191,56 +201,57 @@ def grid_pairs(ids, box, skey, start, layout, limit, buf):
         c = skey[a]
         e = start[c + 2]
         tests += e - a - 1
-        count = scan_boxes(box, ids, a, a + 1, e, buf, count)
+        count = scan_circles(centres, sradii, ids, a, a + 1, e, buf, count)
         s, e = start[c + w - 1], start[c + w + 2]
         tests += e - s
-        count = scan_boxes(box, ids, a, s, e, buf, count)
+        count = scan_circles(centres, sradii, ids, a, s, e, buf, count)
     if first_large == n:
         return count, tests
     # Large against small: the cells their box grown by a small radius covers, plus one cell on
     # each side, which absorbs the rounding of the cell index.
     reach = 0.5 * max(limit, 0.0)
     for a in range(first_large, n):
-        cx0 = max(cell_of(box[a, LX] - reach, ox, inv_x, last_x) - 1, 0)
-        cx1 = min(cell_of(box[a, HX] + reach, ox, inv_x, last_x) + 1, int(last_x))
-        cy0 = max(cell_of(box[a, LY] - reach, oy, inv_y, last_y) - 1, 0)
-        cy1 = min(cell_of(box[a, HY] + reach, oy, inv_y, last_y) + 1, int(last_y))
+        x, y, r = centres[a, 0], centres[a, 1], sradii[a]
+        cx0 = max(cell_of(x - r - reach, ox, inv_x, last_x) - 1, 0)
+        cx1 = min(cell_of(x + r + reach, ox, inv_x, last_x) + 1, int(last_x))
+        cy0 = max(cell_of(y - r - reach, oy, inv_y, last_y) - 1, 0)
+        cy1 = min(cell_of(y + r + reach, oy, inv_y, last_y) + 1, int(last_y))
         for cy in range(cy0, cy1 + 1):
             s, e = start[cy * w + cx0 + 1], start[cy * w + cx1 + 2]
             tests += e - s
-            count = scan_boxes(box, ids, a, s, e, buf, count)
-    # Large against large: sweep along x.
-    by_x = first_large + np.argsort(box[first_large:, LX])
+            count = scan_circles(centres, sradii, ids, a, s, e, buf, count)
+    # Large against large: sweep along x; each candidate is tested as a scan of one slot.
+    lx = centres[first_large:, 0] - sradii[first_large:]
+    by_x = np.argsort(lx)
     for u in range(by_x.shape[0]):
-        a = by_x[u]
+        a = first_large + by_x[u]
+        hx = centres[a, 0] + sradii[a]
         for v in range(u + 1, by_x.shape[0]):
-            b = by_x[v]
-            if box[b, LX] > box[a, HX]:
+            b = first_large + by_x[v]
+            if lx[by_x[v]] > hx:
                 break
             tests += 1
-            if max(box[a, LY], box[b, LY]) <= min(box[a, HY], box[b, HY]):
-                emit(buf, count, ids[a], ids[b])
-                count += 1
+            count = scan_circles(centres, sradii, ids, a, b, b + 1, buf, count)
     return count, tests
 
 
 @nb.njit(cache=True, inline="always")
-def _insert_slot(ids, box, skey, sradii, a):
+def _insert_slot(ids, centres, skey, sradii, a):
     """Move slot a's whole row back past the slots with a larger key; returns the rows moved."""
     k = skey[a]
-    i, r, lx, hx, ly, hy = ids[a], sradii[a], box[a, LX], box[a, HX], box[a, LY], box[a, HY]
+    i, r, x, y = ids[a], sradii[a], centres[a, 0], centres[a, 1]
     b = a - 1
     while b >= 0 and skey[b] > k:
         ids[b + 1], skey[b + 1], sradii[b + 1] = ids[b], skey[b], sradii[b]
-        box[b + 1, LX], box[b + 1, HX], box[b + 1, LY], box[b + 1, HY] = box[b, LX], box[b, HX], box[b, LY], box[b, HY]
+        centres[b + 1, 0], centres[b + 1, 1] = centres[b, 0], centres[b, 1]
         b -= 1
     ids[b + 1], skey[b + 1], sradii[b + 1] = i, k, r
-    box[b + 1, LX], box[b + 1, HX], box[b + 1, LY], box[b + 1, HY] = lx, hx, ly, hy
+    centres[b + 1, 0], centres[b + 1, 1] = x, y
     return a - 1 - b
 
 
 @nb.njit(cache=True)
-def _sort_slots(ids, box, skey, sradii, descents, max_swaps):
+def _sort_slots(ids, centres, skey, sradii, descents, max_swaps):
     """Insertion sort of the slots by key, each slot's whole row moving with it, given the slots
     whose key is below their predecessor's (`descents`, ascending): between two of them the keys
     already ascend, so only the descents and the slots after each one that fall out of order as it
@@ -252,7 +263,7 @@ def _sort_slots(ids, box, skey, sradii, descents, max_swaps):
     for d in descents:
         a = max(d, done)
         while a < n and skey[a] < skey[a - 1]:
-            swaps += _insert_slot(ids, box, skey, sradii, a)
+            swaps += _insert_slot(ids, centres, skey, sradii, a)
             if swaps > max_swaps:
                 return -1
             a += 1
@@ -261,9 +272,9 @@ def _sort_slots(ids, box, skey, sradii, descents, max_swaps):
 
 
 @nb.njit(cache=True)
-def grid_repair(positions, layout, limit, start, xy, descents, slots):
-    """Last frame's slots (ids, boxes, keys, radii) repaired in place for this frame, in the same
-    layout: the new keys, in last frame's slot order, are almost sorted, so an insertion sort that
+def grid_repair(layout, limit, start, descents, slots):
+    """Last frame's slots (ids, centres, keys, radii) repaired in place for this frame, in the same
+    layout, their centres already this frame's: the new keys, in last frame's slot order, are almost sorted, so an insertion sort that
     moves whole rows puts them in order, and each object that changed cell shifts the bucket
     starts between its old and new key by one. That replaces the counting sort's histogram,
     prefix sum over every cell and scattered writes into fresh slots: 10-20 us against 30-40 us
@@ -273,14 +284,12 @@ def grid_repair(positions, layout, limit, start, xy, descents, slots):
     Returns (objects that changed cell, repaired); not repaired when the sort would cost more than
     a counting sort: the slots then hold every object once, in part-sorted order, and `start` is
     stale."""
-    ids, box, skey, sradii = slots
+    ids, centres, skey, sradii = slots
     n = ids.shape[0]
     space = key_space(layout)
-    gather_centres(positions, ids, xy)
     moved = shifts = found = 0
     for a in range(n):
-        x, y, r = xy[a, 0], xy[a, 1], sradii[a]
-        c = cell_key(x, y, r, limit, space)
+        c = cell_key(centres[a, 0], centres[a, 1], sradii[a], limit, space)
         c0 = skey[a]
         if c != c0:
             moved += 1
@@ -292,8 +301,7 @@ def grid_repair(positions, layout, limit, start, xy, descents, slots):
         # Every slot is written at the end of the list; only a descent (a key below the one before) keeps it.
         descents[found] = a
         found += (a > 0) and (c < skey[a - 1])
-        box[a, LX], box[a, HX], box[a, LY], box[a, HY] = x - r, x + r, y - r, y + r
-    if _sort_slots(ids, box, skey, sradii, descents[:found], MAX_SWAPS_PER_OBJECT * n + 64) < 0:
+    if _sort_slots(ids, centres, skey, sradii, descents[:found], MAX_SWAPS_PER_OBJECT * n + 64) < 0:
         return moved, shifts, False
     if shifts > start.shape[0]:  # past that, counting the starts afresh costs less than shifting
         c = 0
@@ -306,25 +314,28 @@ def grid_repair(positions, layout, limit, start, xy, descents, slots):
 
 
 @nb.njit(cache=True)
-def grid_update(positions, radii, order, last_key, p, cell, max_cells, layout, start, key, xy, slots, spare, repair):
+def grid_update(positions, radii, order, last_key, xy, p, cell, max_cells, layout, start, key, slots, spare, repair):
     """One call per frame (each compiled call from Python costs microseconds): the layout, the
-    small-object limit, and the slots (ids, boxes, keys, radii) for this frame: `slots` repaired in
-    place if `repair` and the layout is kept, else counting-sorted from `order` into `spare`.
+    small-object limit, and the slots (ids, centres, keys, radii) for this frame: `slots`
+    repaired in place if `repair` and the layout is kept, else counting-sorted from `order` into
+    `spare`. This frame's centres are gathered in `order` into `xy`: when `order` is the slots'
+    ids, `xy` must be the slots' centres, which a repair then needs no other copy of.
     Returns (relayout, limit, bucket starts, objects moved, keys they crossed, whether `spare` now
     holds the slots)."""
-    extent = centre_extents(positions)
+    extent = centre_extents(positions)  # a sequential pass, which also brings the centres into cache for the gather
+    gather_centres(positions, order, xy)
     relayout = grid_layout(extent, positions.shape[0], p, cell, max_cells, layout)
     limit = small_limit(extent, layout)
     if repair and not relayout:
-        moved, shifts, repaired = grid_repair(positions, layout, limit, start, xy, key, slots)
+        moved, shifts, repaired = grid_repair(layout, limit, start, key, slots)
         if repaired:
             return relayout, limit, start, moved, shifts, False
-        ids, _, skey, sradii = slots  # count afresh from the part-sorted slots
-        start, _, _ = grid_build(positions, sradii, ids, skey, layout, limit, start, key, xy, *spare)
+        ids, centres, skey, sradii = slots  # count afresh from the part-sorted slots
+        start, _, _ = grid_build(centres, sradii, ids, skey, layout, limit, start, key, *spare)
         return relayout, limit, start, moved, shifts, True
     if relayout:
         last_key = np.full(positions.shape[0], -1, dtype=last_key.dtype)  # cells of another layout
-    start, moved, shifts = grid_build(positions, radii, order, last_key, layout, limit, start, key, xy, *spare)
+    start, moved, shifts = grid_build(xy, radii, order, last_key, layout, limit, start, key, *spare)
     return relayout, limit, start, moved, shifts, True
 
 
@@ -365,11 +376,12 @@ class UniformGrid(BroadPhase):
         self._max_cells = MAX_CELLS_PER_OBJECT * self.n + 16
         self._layout = np.zeros(6)
         n = self.n
-        # Slot arrays (ids, boxes, keys, radii), double-buffered: the build reads last frame's
-        # while it writes this frame's. Work arrays are kept from frame to frame.
-        self._slots = (np.arange(n, dtype=np.int64), np.empty((n, 4)), np.full(n, -1, dtype=np.int64), radii.copy())
-        self._spare = (np.empty(n, dtype=np.int64), np.empty((n, 4)), np.empty(n, dtype=np.int64), np.empty(n))
-        self._scratch = (np.empty(n, dtype=np.int64), np.empty((n, 2)))
+        # Slot arrays (ids, centres, keys, radii), double-buffered: the build reads last frame's
+        # while it writes this frame's. Work arrays are kept from frame to frame. Slots hold
+        # centres, not boxes: half the bytes to move at large n, and bounds cost little to redo.
+        self._slots = (np.arange(n, dtype=np.int64), np.empty((n, 2)), np.full(n, -1, dtype=np.int64), radii.copy())
+        self._spare = (np.empty(n, dtype=np.int64), np.empty((n, 2)), np.empty(n, dtype=np.int64), np.empty(n))
+        self._key, self._xy = np.empty(n, dtype=np.int64), np.empty((n, 2))
         self._start = np.zeros(0, dtype=np.int64)
         self._collect = PairCollector()
         self._repair = False
@@ -377,15 +389,15 @@ class UniformGrid(BroadPhase):
 
     def _update(self, positions):
         self._positions = positions
-        ids, _, key, sradii = self._slots
+        ids, centres, key, sradii = self._slots
         if self.params["coherent"]:  # last frame's cell order
-            order, radii, last_key = ids, sradii, key
+            order, radii, last_key, xy = ids, sradii, key, centres
         else:  # input order; last frame's cells looked up per object
-            order, radii, last_key = np.arange(self.n, dtype=np.int64), self.radii, np.empty_like(key)
+            order, radii, last_key, xy = np.arange(self.n, dtype=np.int64), self.radii, np.empty_like(key), self._xy
             last_key[ids] = key
         relayout, self._limit, self._start, moved, shifts, rebuilt = grid_update(
-            positions, radii, order, last_key, self._p, self._cell, self._max_cells, self._layout,
-            self._start, *self._scratch, self._slots, self._spare, self._repair,
+            positions, radii, order, last_key, xy, self._p, self._cell, self._max_cells, self._layout,
+            self._start, self._key, self._slots, self._spare, self._repair,
         )
         # Repair next frame while this frame's objects crossed fewer keys than there are: a
         # repair moves about (keys crossed) x (objects per key) rows, and shifts as many starts.
@@ -401,8 +413,8 @@ class UniformGrid(BroadPhase):
         return int(key_space(self._layout)[-1])
 
     def _pairs(self):
-        ids, box, key, _ = self._slots
-        out, (tests,) = self._collect(grid_pairs, ids, box, key, self._start, self._layout, self._limit)
+        ids, centres, key, sradii = self._slots
+        out, (tests,) = self._collect(grid_pairs, ids, centres, sradii, key, self._start, self._layout, self._limit)
         self._counters["tests"] = tests
         return out
 
