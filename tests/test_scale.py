@@ -68,4 +68,5 @@ def test_bench_quick_prints_the_targets():
     assert [(line[1], line[3]) for line in lines] == [("own.grid", "1"), ("own.sap", "1"), ("own.quadtree", "1"),
                                                       ("own.sap", str(threads()))]
     assert [line[2] for line in lines][-1] == "own.sap_parallel"
-    assert all(float(line[4]) > 0 and line[6].endswith("x") and float(line[7]) > 0 for line in lines)
+    assert all(float(line[4]) > 0 and line[6].endswith("x") and float(line[7]) > 0 and float(line[8]) > 0
+               for line in lines)

@@ -103,6 +103,24 @@ def test_each_frame_records_its_exact_pairs():
         np.testing.assert_array_equal(traj.box_pairs[f], brute_pairs(traj.positions[f], traj.scene.radii))
 
 
+def test_renumbered_trajectory_is_the_same_motion_with_every_pair_mapped():
+    from engines.pairs import narrow_phase
+    from own.brute import brute_pairs
+
+    traj = simulate(generate("clusters", 300, seed=9, speed=800.0), 4)
+    order = np.random.default_rng(1).permutation(300)
+    again = traj.renumbered(order)
+    np.testing.assert_array_equal(again.scene.radii, traj.scene.radii[order])
+    for f in range(traj.frames):
+        np.testing.assert_array_equal(again.positions[f], traj.positions[f][order])
+        pairs = brute_pairs(again.positions[f], again.scene.radii)
+        np.testing.assert_array_equal(again.box_pairs[f], pairs)
+        np.testing.assert_array_equal(again.contacts[f], narrow_phase(again.positions[f], again.scene.radii, pairs))
+    assert sum(len(p) for p in again.contacts) > 0  # the scene does touch
+    with pytest.raises(ValueError, match="permutation"):
+        traj.renumbered(np.zeros(300, dtype=np.int64))
+
+
 def test_scene_validates_its_arrays():
     with pytest.raises(ValueError, match="radius 1 is negative"):
         Scene(np.zeros((2, 2)), np.array([1.0, -1.0]), np.zeros((2, 2)))
