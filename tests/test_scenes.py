@@ -119,6 +119,8 @@ def test_renumbered_trajectory_is_the_same_motion_with_every_pair_mapped():
     assert sum(len(p) for p in again.contacts) > 0  # the scene does touch
     with pytest.raises(ValueError, match="permutation"):
         traj.renumbered(np.zeros(300, dtype=np.int64))
+    with pytest.raises(ValueError, match="permutation"):
+        traj.renumbered(order.astype(float))
 
 
 def test_scene_validates_its_arrays():

@@ -274,9 +274,9 @@ def _sort_slots(ids, centres, skey, sradii, descents, max_swaps):
 @nb.njit(cache=True)
 def grid_repair(layout, limit, start, descents, slots):
     """Last frame's slots (ids, centres, keys, radii) repaired in place for this frame, in the same
-    layout, their centres already this frame's: the new keys, in last frame's slot order, are almost sorted, so an insertion sort that
-    moves whole rows puts them in order, and each object that changed cell shifts the bucket
-    starts between its old and new key by one. That replaces the counting sort's histogram,
+    layout, their centres already this frame's: the new keys, in last frame's slot order, are
+    almost sorted, so an insertion sort that moves whole rows puts them in order, and each object
+    that changed cell shifts the bucket starts between its old and new key by one. That replaces the counting sort's histogram,
     prefix sum over every cell and scattered writes into fresh slots: 10-20 us against 30-40 us
     at n = 2048, where a few objects change cell per frame, and 2.3-3.0 against 3.2-3.4 ms at
     n = 131072. `descents` is scratch for the slots that fall out of order (n of them at most).
@@ -378,7 +378,8 @@ class UniformGrid(BroadPhase):
         n = self.n
         # Slot arrays (ids, centres, keys, radii), double-buffered: the build reads last frame's
         # while it writes this frame's. Work arrays are kept from frame to frame. Slots hold
-        # centres, not boxes: half the bytes to move at large n, and bounds cost little to redo.
+        # centres, not boxes: 16 bytes less per slot for the sort and the repair to move, for a
+        # few flops in the scan (4-5% faster at every n).
         self._slots = (np.arange(n, dtype=np.int64), np.empty((n, 2)), np.full(n, -1, dtype=np.int64), radii.copy())
         self._spare = (np.empty(n, dtype=np.int64), np.empty((n, 2)), np.empty(n, dtype=np.int64), np.empty(n))
         self._key, self._xy = np.empty(n, dtype=np.int64), np.empty((n, 2))

@@ -93,7 +93,8 @@ class Trajectory:
         order. For measuring what the numbering alone costs a backend (its memory order)."""
         n = self.scene.n
         order = np.asarray(order)
-        if order.shape != (n,) or not np.array_equal(np.sort(order), np.arange(n)):
+        is_permutation = order.shape == (n,) and np.array_equal(np.sort(order), np.arange(n))
+        if not (np.issubdtype(order.dtype, np.integer) and is_permutation):
             raise ValueError(f"order must be a permutation of the {n} objects")
         new_of = np.empty(n, dtype=np.int64)
         new_of[order] = np.arange(n)
