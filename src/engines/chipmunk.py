@@ -86,10 +86,10 @@ class _Chipmunk(BroadPhase):
         return canonical(self._indices(ids[:, 0]), self._indices(ids[:, 1]))
 
     def close(self):
-        """Free the space. pymunk's finalizer removes the shapes one by one, and Chipmunk scans
-        every cached arbiter for each removal: 21 s at n = 65536, over a minute at 131072. After
-        one step in which no pair may collide (all shapes in one filter group) the cache is
-        empty and the teardown is linear."""
+        """Free the space. pymunk's finalizer removes the shapes one by one, and Chipmunk filters
+        its cache of arbiters (kept pairs) for each removal: 21 s at n = 65536, over a minute at
+        131072. One step in which no pair may collide (all shapes in one filter group) empties
+        the cache first: 5.8 s at 65536 (the removals still cost more the more shapes remain)."""
         if self._space is not None and self._space.shapes:
             no_pairs = pymunk.ShapeFilter(group=1)
             for shape in self._space.shapes:
