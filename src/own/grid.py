@@ -276,10 +276,11 @@ def grid_repair(layout, limit, start, descents, slots):
     """Last frame's slots (ids, centres, keys, radii) repaired in place for this frame, in the same
     layout, their centres already this frame's: the new keys, in last frame's slot order, are
     almost sorted, so an insertion sort that moves whole rows puts them in order, and each object
-    that changed cell shifts the bucket starts between its old and new key by one. That replaces the counting sort's histogram,
-    prefix sum over every cell and scattered writes into fresh slots: 10-20 us against 30-40 us
-    at n = 2048, where a few objects change cell per frame, and 2.3-3.0 against 3.2-3.4 ms at
-    n = 131072. `descents` is scratch for the slots that fall out of order (n of them at most).
+    that changed cell shifts the bucket starts between its old and new key by one. That replaces
+    the counting sort's histogram, prefix sum over every cell and scattered writes into fresh
+    slots: 10-20 us against 30-40 us at n = 2048, where a few objects change cell per frame, and
+    2.3-3.0 against 3.2-3.4 ms at n = 131072. `descents` is scratch for the slots that fall out of
+    order (n of them at most).
 
     Returns (objects that changed cell, repaired); not repaired when the sort would cost more than
     a counting sort: the slots then hold every object once, in part-sorted order, and `start` is
@@ -322,7 +323,8 @@ def grid_update(positions, radii, order, last_key, xy, p, cell, max_cells, layou
     ids, `xy` must be the slots' centres, which a repair then needs no other copy of.
     Returns (relayout, limit, bucket starts, objects moved, keys they crossed, whether `spare` now
     holds the slots)."""
-    extent = centre_extents(positions)  # a sequential pass, which also brings the centres into cache for the gather
+    # A sequential pass first, which also brings the centres into cache for the gather.
+    extent = centre_extents(positions)
     gather_centres(positions, order, xy)
     relayout = grid_layout(extent, positions.shape[0], p, cell, max_cells, layout)
     limit = small_limit(extent, layout)
