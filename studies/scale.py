@@ -190,7 +190,7 @@ def parse(argv):
     p.add_argument("--budget", type=float, default=1.0, metavar="S",
                    help="stop a backend once a frame takes longer than S seconds (default 1)")
     # Most jobs take seconds, even at 2^20. The limit stops the few that would take minutes: on
-    # the clustered scene at n = 262144 the exact checks of its dense frames alone exceed it (a
+    # the clustered scene at n = 262144 a job (build, frames, exact checks of dense frames) exceeds it (a
     # limit of 300 s reached that size, but let each Chipmunk backend spend all of it at n = 32768).
     p.add_argument("--timeout", type=float, default=60.0, metavar="S", help="per backend and size (default 60)")
     p.add_argument("--quick", action="store_true", help="a smoke run: n up to 2^11, one frame")
