@@ -11,7 +11,8 @@ exact, and a big object costs in proportion to its area rather than slowing ever
 Memory order is what matters at a million objects, so objects are kept in last frame's cell order
 (with their radii): the counting sort then writes memory almost sequentially, and its only
 scattered reads, the centres, are done in one short loop that keeps many misses in flight. In
-input order instead, the histogram and the scatter jump through memory: 2x slower at n = 2^20.
+input order instead, the histogram and the scatter jump through memory: 3x slower per frame at
+n = 2^20 and 131072, 1.6x at 2048 (`python -m studies.bench --coherence`).
 While few objects change cell, the slots are not sorted again but repaired in place (grid_repair).
 The cell layout is kept while it still fits the scene, so cells do not shift under objects that
 did not move. Cells are clamped to the layout (monotone in the coordinate), so an object outside
@@ -139,7 +140,7 @@ def grid_build(xy, radii, order, last_key, layout, limit, start, key, ids, centr
     Cell (cx, cy) has key cy * (nx + 2) + cx + 1; the large bucket has key (ny + 1) * (nx + 2).
     `xy`, `radii` and `last_key` are per slot of `order` (this frame's centres, gathered; last
     frame's slot radii and keys, or the input radii and -1s). Fills slot ids, centres (n, 2), keys
-    and radii; `key` is scratch. Every array is the caller's, reused from frame to frame: fresh
+    and radii, and `key` with the keys in `order`, which may be `last_key` itself. Every array is the caller's, reused from frame to frame: fresh
     ones would cost a page fault per 4 KiB, at large n more than the sort.
     Returns (bucket starts, objects that changed cell): bucket k holds slots start[k]:start[k + 1];
     `start` is reused when it has the size of this layout's key space.
@@ -153,12 +154,12 @@ def grid_build(xy, radii, order, last_key, layout, limit, start, key, ids, centr
         start = np.zeros(large + 2, dtype=start.dtype)
     moved = shifts = 0
     for k in range(n):
-        c = cell_key(xy[k, 0], xy[k, 1], radii[k], limit, space)
+        c, c0 = cell_key(xy[k, 0], xy[k, 1], radii[k], limit, space), last_key[k]
         key[k] = c
         start[c] += 1
-        if c != last_key[k]:
+        if c != c0:
             moved += 1
-            shifts += abs(c - last_key[k])
+            shifts += abs(c - c0)
     total = 0
     for c in range(large + 2):  # start[c] = end of bucket c (a running sum: no reload per cell)
         total += start[c]
@@ -282,9 +283,9 @@ def grid_repair(layout, limit, start, descents, slots):
     2.3-3.0 against 3.2-3.4 ms at n = 131072. `descents` is scratch for the slots that fall out of
     order (n of them at most).
 
-    Returns (objects that changed cell, repaired); not repaired when the sort would cost more than
-    a counting sort: the slots then hold every object once, in part-sorted order, and `start` is
-    stale."""
+    Returns (objects that changed cell, keys they crossed, rows the sort moved); the rows are -1
+    when the sort would cost more than a counting sort and gave up: the slots then hold every
+    object once, in part-sorted order, and `start` is stale."""
     ids, centres, skey, sradii = slots
     n = ids.shape[0]
     space = key_space(layout)
@@ -302,8 +303,9 @@ def grid_repair(layout, limit, start, descents, slots):
         # Every slot is written at the end of the list; only a descent (a key below the one before) keeps it.
         descents[found] = a
         found += (a > 0) and (c < skey[a - 1])
-    if _sort_slots(ids, centres, skey, sradii, descents[:found], MAX_SWAPS_PER_OBJECT * n + 64) < 0:
-        return moved, shifts, False
+    swaps = _sort_slots(ids, centres, skey, sradii, descents[:found], MAX_SWAPS_PER_OBJECT * n + 64)
+    if swaps < 0:
+        return moved, shifts, swaps
     if shifts > start.shape[0]:  # past that, counting the starts afresh costs less than shifting
         c = 0
         for a in range(n):
@@ -311,7 +313,7 @@ def grid_repair(layout, limit, start, descents, slots):
                 start[c] = a
                 c += 1
         start[c:] = n
-    return moved, shifts, True
+    return moved, shifts, swaps
 
 
 @nb.njit(cache=True)
@@ -321,24 +323,24 @@ def grid_update(positions, radii, order, last_key, xy, p, cell, max_cells, layou
     repaired in place if `repair` and the layout is kept, else counting-sorted from `order` into
     `spare`. This frame's centres are gathered in `order` into `xy`: when `order` is the slots'
     ids, `xy` must be the slots' centres, which a repair then needs no other copy of.
-    Returns (relayout, limit, bucket starts, objects moved, keys they crossed, whether `spare` now
-    holds the slots)."""
+    Returns (relayout, limit, bucket starts, objects moved, keys they crossed, rows the repair
+    moved): the rows are -1 after a counting sort, which leaves the slots in `spare`."""
     # A sequential pass first, which also brings the centres into cache for the gather.
     extent = centre_extents(positions)
     gather_centres(positions, order, xy)
     relayout = grid_layout(extent, positions.shape[0], p, cell, max_cells, layout)
     limit = small_limit(extent, layout)
     if repair and not relayout:
-        moved, shifts, repaired = grid_repair(layout, limit, start, key, slots)
-        if repaired:
-            return relayout, limit, start, moved, shifts, False
+        moved, shifts, swaps = grid_repair(layout, limit, start, key, slots)
+        if swaps >= 0:
+            return relayout, limit, start, moved, shifts, swaps
         ids, centres, skey, sradii = slots  # count afresh from the part-sorted slots
         start, _, _ = grid_build(centres, sradii, ids, skey, layout, limit, start, key, *spare)
-        return relayout, limit, start, moved, shifts, True
+        return relayout, limit, start, moved, shifts, -1
     if relayout:
         last_key = np.full(positions.shape[0], -1, dtype=last_key.dtype)  # cells of another layout
     start, moved, shifts = grid_build(xy, radii, order, last_key, layout, limit, start, key, *spare)
-    return relayout, limit, start, moved, shifts, True
+    return relayout, limit, start, moved, shifts, -1
 
 
 def default_cell(radii: np.ndarray) -> float:
@@ -385,6 +387,7 @@ class UniformGrid(BroadPhase):
         self._slots = (np.arange(n, dtype=np.int64), np.empty((n, 2)), np.full(n, -1, dtype=np.int64), radii.copy())
         self._spare = (np.empty(n, dtype=np.int64), np.empty((n, 2)), np.empty(n, dtype=np.int64), np.empty(n))
         self._key, self._xy = np.empty(n, dtype=np.int64), np.empty((n, 2))
+        self._input_order = np.arange(n, dtype=np.int64)
         self._start = np.zeros(0, dtype=np.int64)
         self._collect = PairCollector()
         self._repair = False
@@ -395,10 +398,9 @@ class UniformGrid(BroadPhase):
         ids, centres, key, sradii = self._slots
         if self.params["coherent"]:  # last frame's cell order
             order, radii, last_key, xy = ids, sradii, key, centres
-        else:  # input order; last frame's cells looked up per object
-            order, radii, last_key, xy = np.arange(self.n, dtype=np.int64), self.radii, np.empty_like(key), self._xy
-            last_key[ids] = key
-        relayout, self._limit, self._start, moved, shifts, rebuilt = grid_update(
+        else:  # input order, in which the build left last frame's keys in self._key
+            order, radii, last_key, xy = self._input_order, self.radii, self._key, self._xy
+        relayout, self._limit, self._start, moved, shifts, swaps = grid_update(
             positions, radii, order, last_key, xy, self._p, self._cell, self._max_cells, self._layout,
             self._start, self._key, self._slots, self._spare, self._repair,
         )
@@ -406,10 +408,10 @@ class UniformGrid(BroadPhase):
         # repair moves about (keys crossed) x (objects per key) rows, and shifts as many starts.
         # At n = 2^20, where a row of cells holds 600 objects, counting is 1.4x faster.
         self._repair = self.params["coherent"] and shifts <= len(self._start)
-        if rebuilt:
+        if swaps < 0:  # counted into the spare slots
             self._slots, self._spare = self._spare, self._slots
         # Kept raw, made a dict only when asked: building it every frame costs 4% of a frame at n = 2048.
-        self._counters = {"moved": moved, "relayout": int(relayout), "repaired": int(not rebuilt)}
+        self._counters = {"moved": moved, "relayout": int(relayout), "swaps": swaps}
 
     def _large_key(self) -> int:
         """Key of the large bucket in grid_build's padded key space."""

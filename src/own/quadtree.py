@@ -217,14 +217,15 @@ class Quadtree(BroadPhase):
     A node splits when its subtree holds more than `capacity` objects, it is shallower than
     `max_depth` (at most MAX_DEPTH) and some of its objects fit a child. Objects that straddle a
     node's middle lines stay in that node, so large objects sit near the root and are tested
-    against everything below them.
+    against everything below them. `coherent` takes the objects in last frame's sorted order and
+    repairs it (False sorts from the input order every frame, to measure what coherence saves).
     """
 
     name = "own.quadtree"
     # Capacity 32: in the tuning study over the scene families (docs/TUNING.md, n = 1024 and
     # 8192), 16 and 32 came within 10-14 % of each scene's best capacity on average, 8 was 23 %
     # off; on the uniform scene at n = 2048, 2^17 and 2^20, 32 was best of 8..64 or within noise.
-    defaults = {"capacity": 32, "max_depth": 16}
+    defaults = {"capacity": 32, "max_depth": 16, "coherent": True}
 
     def __init__(self, **params):
         super().__init__(**params)
@@ -244,6 +245,8 @@ class Quadtree(BroadPhase):
         self._update(positions)
 
     def _update(self, positions):
+        if not self.params["coherent"]:
+            self._order[:1] = -1  # no last order (as before the first frame): sort from the input order
         self._keys, self._nodes, self._bounds, self._frame, swaps = quadtree_build(
             positions, self.radii, self._max_depth, self._capacity, self._order, self._spare_order, self._work, self._box
         )
