@@ -12,6 +12,11 @@ objects' centres jumps through memory; the last column is the same motion with t
 numbered along a Morton curve, as particle codes renumber theirs now and then. The targets are
 held to the generated order; the last column shows what memory order alone is worth (most at
 n = 2^20, where the centres no longer fit in the caches).
+
+With --coherence it prints instead what temporal coherence saves: each of our sorted structures
+sorted from scratch every frame against kept in last frame's order and repaired, with the repair's
+work per frame (rows or entries moved by its insertion sort, and for the grid the objects that
+changed cell).
 """
 
 from __future__ import annotations
@@ -45,15 +50,23 @@ PARALLEL = ("own.sap", "own.sap_parallel")
 # Passes over the frames in the tight loop; the fastest pass's median counts (other programs on a
 # shared machine only ever add time).
 PASSES = 3
+# Our backends that keep a sorted order between frames: (parameters that sort from scratch every
+# frame, parameters that keep last frame's order and repair it).
+COHERENCE = {
+    "own.grid": ({"coherent": False}, {"coherent": True}),
+    "own.sap": ({"incremental": False}, {"incremental": True}),
+    "own.quadtree": ({"coherent": False}, {"coherent": True}),
+}
 
 
-def tight_loop_ms(backend: str, traj: Trajectory) -> float:
+def tight_loop(backend: str, traj: Trajectory, **params) -> tuple[float, list[dict]]:
     """Median ms of update + pairs over frames 1.. called back to back (best of PASSES), after
-    checking that every frame's pairs are exactly the box overlaps."""
-    bp = engines.create(backend)
+    checking that every frame's pairs are exactly the box overlaps; and the backend's counters
+    after each frame of the first pass (the one that follows frame 0, as a simulation would)."""
+    bp = engines.create(backend, **params)
     bp.reset(traj.positions[0], traj.scene.radii)
     bp.pairs()  # the warm-up frame: build, JIT compile
-    n, best = traj.scene.n, float("inf")
+    n, best, counters = traj.scene.n, float("inf"), []
     gc.disable()  # a collection inside a timed frame would be noise, not the backend's cost
     try:
         for _ in range(PASSES):
@@ -64,13 +77,15 @@ def tight_loop_ms(backend: str, traj: Trajectory) -> float:
                 pairs = bp.pairs()
                 times.append(time.perf_counter() - t0)
                 found.append(pairs)
+                if len(counters) < traj.frames - 1:
+                    counters.append(bp.stats())
             best = min(best, float(np.median(times)))
     finally:
         gc.enable()
     for f, pairs in enumerate(found, start=1):
         if not np.array_equal(np.sort(keys(pairs, n)), np.sort(keys(traj.box_pairs[f], n))):
-            raise CliError(f"{backend} returned wrong pairs in frame {f}: not timed")
-    return best * 1e3
+            raise CliError(f"{bp.describe()} returned wrong pairs in frame {f}: not timed")
+    return best * 1e3, counters
 
 
 def spatial_order(positions: np.ndarray) -> np.ndarray:
@@ -86,29 +101,63 @@ def harness_ms(backend: str, traj: Trajectory) -> float:
     return float(np.median([r["t_update_s"] + r["t_pairs_s"] for r in result.rows]) * 1e3)
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = Parser(prog="python -m studies.bench", description=__doc__.split("\n\n")[0])
-    p.add_argument("--quick", action="store_true", help="only n = 2048")
-    p.add_argument("--frames", type=int, default=10, help="timed frames per size (default 10)")
-    args = p.parse_args(argv)
-    if args.frames < 1:
-        raise CliError("--frames must be at least 1")
-    sizes = [2048] if args.quick else list(TARGETS_MS)
+def _trajectory(n: int, frames: int) -> Trajectory:
+    """The uniform scene of n objects stepped for the timed frames after frame 0: fewer at a
+    million objects, where each frame's exact reference is itself costly."""
+    return simulate(at_essay_density("uniform", n), (frames if n <= 131072 else max(2, frames // 3)) + 1)
+
+
+def print_targets(trajectories) -> None:
     print(f"{'n':>9} {'backend':<14} {'variant':<20} {'threads':>7} {'measured ms':>12} {'target ms':>10} "
           f"{'measured/target':>16} {'in harness ms':>14} {'spatial order ms':>17}")
-    for n in sizes:
-        # Fewer frames at a million objects: each frame's exact reference is itself costly.
-        traj = simulate(at_essay_density("uniform", n), (args.frames if n <= 131072 else max(2, args.frames // 3)) + 1)
+    for traj in trajectories:
+        n = traj.scene.n
         in_space = traj.renumbered(spatial_order(traj.positions[0]))
         rows = [(backend, VARIANTS[backend], 1, target) for backend, target in TARGETS_MS[n].items()]
         rows.append((PARALLEL[0], [PARALLEL[1]], threads(), TARGETS_MS[n][PARALLEL[0]]))
         for backend, variants, used, target in rows:
-            measured = {v: tight_loop_ms(v, traj) for v in variants}
+            measured = {v: tight_loop(v, traj)[0] for v in variants}
             best = min(measured, key=measured.get)
             print(f"{n:>9} {backend:<14} {best:<20} {used:>7} {measured[best]:>12.3f} {target:>10.3f} "
                   f"{measured[best] / target:>15.1f}x {harness_ms(best, traj):>14.3f} "
-                  f"{tight_loop_ms(best, in_space):>17.3f}")
+                  f"{tight_loop(best, in_space)[0]:>17.3f}")
             sys.stdout.flush()
+
+
+def print_coherence(trajectories) -> None:
+    """Each of COHERENCE's backends from scratch and coherent, side by side in one run, with the
+    repair's work: frames it repaired (the others it sorted afresh, as -1 swaps say), the median
+    rows or entries its insertion sort moved in those, and for the grid the objects that changed cell."""
+    print(f"{'n':>9} {'backend':<14} {'from scratch ms':>16} {'coherent ms':>12} {'scratch/coherent':>17} "
+          f"{'repaired frames':>16} {'moved by repair':>16} {'changed cell':>13}")
+    for traj in trajectories:
+        n, frames = traj.scene.n, traj.frames - 1
+        for backend, (scratch, coherent) in COHERENCE.items():
+            scratch_ms, _ = tight_loop(backend, traj, **scratch)
+            coherent_ms, counters = tight_loop(backend, traj, **coherent)
+            swaps = [c["swaps"] for c in counters if c["swaps"] >= 0]
+            moved_by_repair = f"{np.median(swaps):.0f}" if swaps else "-"
+            changed_cell = f"{np.median([c['moved'] for c in counters]):.0f}" if "moved" in counters[0] else "-"
+            print(f"{n:>9} {backend:<14} {scratch_ms:>16.3f} {coherent_ms:>12.3f} {scratch_ms / coherent_ms:>16.2f}x "
+                  f"{f'{len(swaps)}/{frames}':>16} {moved_by_repair:>16} {changed_cell:>13}")
+            sys.stdout.flush()
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = Parser(prog="python -m studies.bench", description=__doc__.split("\n\n")[0])
+    p.add_argument("--quick", action="store_true", help="only n = 2048")
+    p.add_argument("--frames", type=int, default=10, help="timed frames per size (default 10)")
+    p.add_argument("--coherence", action="store_true",
+                   help="time each sorted structure from scratch against repaired from last frame's order")
+    args = p.parse_args(argv)
+    if args.frames < 1:
+        raise CliError("--frames must be at least 1")
+    sizes = [2048] if args.quick else list(TARGETS_MS)
+    trajectories = (_trajectory(n, args.frames) for n in sizes)
+    if args.coherence:
+        print_coherence(trajectories)
+    else:
+        print_targets(trajectories)
     return 0
 
 

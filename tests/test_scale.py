@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pandas as pd
+import pytest
 
 from own.parallel import threads
 from studies.scale import growth_exponent, ours_against_engines_per_n
@@ -70,3 +71,21 @@ def test_bench_quick_prints_the_targets():
     assert [line[2] for line in lines][-1] == "own.sap_parallel"
     assert all(float(line[4]) > 0 and line[6].endswith("x") and float(line[7]) > 0 and float(line[8]) > 0
                for line in lines)
+
+
+def test_bench_coherence_sets_each_sorted_structure_from_scratch_beside_repaired():
+    done = subprocess.run([sys.executable, "-m", "studies.bench", "--quick", "--coherence", "--frames", "3"], cwd=ROOT,
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    lines = {line.split()[1]: line.split() for line in done.stdout.splitlines()[1:]}
+    assert list(lines) == ["own.grid", "own.sap", "own.quadtree"]
+    for n, _, scratch_ms, coherent_ms, ratio, repaired, moved_by_repair, changed_cell in lines.values():
+        assert n == "2048" and float(scratch_ms) > 0 and float(coherent_ms) > 0
+        assert ratio.endswith("x")  # of the unrounded times, so only about that of the printed ones
+        assert float(ratio[:-1]) == pytest.approx(float(scratch_ms) / float(coherent_ms), rel=0.05)
+        done_frames, frames = map(int, repaired.split("/"))
+        assert frames == 3 and 0 <= done_frames <= 3
+        assert moved_by_repair == "-" if done_frames == 0 else int(moved_by_repair) >= 0
+    # Objects moving 1/6 unit per frame: the sorted orders are repaired, not sorted afresh.
+    assert lines["own.sap"][5] == lines["own.quadtree"][5] == "3/3"
+    assert 0 < int(lines["own.grid"][7]) < 2048 and lines["own.sap"][7] == lines["own.quadtree"][7] == "-"
