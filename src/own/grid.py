@@ -140,10 +140,11 @@ def grid_build(xy, radii, order, last_key, layout, limit, start, key, ids, centr
     Cell (cx, cy) has key cy * (nx + 2) + cx + 1; the large bucket has key (ny + 1) * (nx + 2).
     `xy`, `radii` and `last_key` are per slot of `order` (this frame's centres, gathered; last
     frame's slot radii and keys, or the input radii and -1s). Fills slot ids, centres (n, 2), keys
-    and radii, and `key` with the keys in `order`, which may be `last_key` itself. Every array is the caller's, reused from frame to frame: fresh
-    ones would cost a page fault per 4 KiB, at large n more than the sort.
-    Returns (bucket starts, objects that changed cell): bucket k holds slots start[k]:start[k + 1];
-    `start` is reused when it has the size of this layout's key space.
+    and radii, and `key` with the keys in `order` (it may be `last_key` itself). Every array is the
+    caller's, reused from frame to frame: fresh ones would cost a page fault per 4 KiB, at large n
+    more than the sort.
+    Returns (bucket starts, objects that changed cell, keys they crossed): bucket k holds slots
+    start[k]:start[k + 1]; `start` is reused when it has the size of this layout's key space.
     """
     n = order.shape[0]
     space = key_space(layout)
