@@ -42,10 +42,12 @@ def _fixed(values: list[Any]) -> Callable[[Scene], list[Any]]:
 GRID_CELL_FACTORS = (0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 3.0, 4.0, 6.0)
 HASH_DIM_FACTORS = (0.5, 1.0, 2.0, 3.0, 4.0, 6.0)
 AXES = _fixed(["x", "y", "auto"])
+GRID_CELL = Knob("cell", _sizes(lambda s: default_cell(s.radii) or _mean_diameter(s), GRID_CELL_FACTORS),
+                 "requested cell size")
 
 KNOBS: dict[str, list[Knob]] = {
-    "own.grid": [Knob("cell", _sizes(lambda s: default_cell(s.radii) or _mean_diameter(s), GRID_CELL_FACTORS),
-                      "requested cell size")],
+    "own.grid": [GRID_CELL],
+    "own.grid_incremental": [GRID_CELL],
     "own.quadtree": [Knob("capacity", _fixed([1, 2, 4, 8, 16, 32, 64]), "capacity (objects per leaf)"),
                      Knob("max_depth", _fixed([4, 6, 8, 10, 12, 16, 24]), "maximum depth")],
     "own.bvh": [Knob("leaf_size", _fixed([1, 2, 4, 8, 16]), "objects per leaf")],

@@ -56,7 +56,8 @@ ready = time.perf_counter()
 import engines
 from scenes import generate
 scene = generate("uniform", 256, seed=0)
-for name in ("own.sap", "own.sap_incremental", "own.sap_parallel", "own.grid", "own.quadtree", "own.bvh"):
+for name in ("own.sap", "own.sap_incremental", "own.sap_parallel", "own.grid", "own.grid_incremental", "own.quadtree",
+             "own.bvh"):
     b = engines.create(name)
     b.reset(scene.positions, scene.radii)
     b.update(scene.positions)

@@ -11,7 +11,7 @@ from engines.reference import BRUTE_FORCE_LIMIT, box_pairs
 from own.brute import brute_pairs
 from scenes import generate
 
-OWN = ["own.brute", "own.sap", "own.grid", "own.quadtree", "own.bvh", "essay.sap", "essay.grid", "essay.quadtree"]
+OWN = ["own.brute", "own.sap", "own.grid", "own.grid_incremental", "own.quadtree", "own.bvh", "essay.sap", "essay.grid", "essay.quadtree"]
 
 
 def test_registry_lists_own_backends_as_available():

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import engines
 from engines.pairs import is_canonical, keys
@@ -28,6 +29,9 @@ EXACT = [
     ("own.grid", {"p": 7}),
     ("own.grid", {"cell": 0.3}),  # cells far smaller than most objects: most are "large"
     ("own.grid", {"coherent": False}),
+    ("own.grid_incremental", {}),
+    ("own.grid_incremental", {"p": 7}),
+    ("own.grid_incremental", {"cell": 0.3}),  # most objects large: found afresh every frame
     ("own.quadtree", {}),
     ("own.quadtree", {"capacity": 1}),
     ("own.quadtree", {"capacity": 2, "max_depth": 3}),
@@ -216,3 +220,38 @@ def test_coherent_sorts_repair_small_motion_and_resort_after_large(name):
     assert backend.stats()["swaps"] == -1  # too much motion: sorted from scratch
     assert set(map(tuple, backend.pairs().tolist())) == set(map(tuple, brute_pairs(shuffled, traj.scene.radii).tolist()))
     backend.validate()
+
+
+@pytest.mark.parametrize("params", [{}, {"cell": 5.0}], ids=["default", "small cells"])
+@settings(max_examples=60)
+@given(scene=any_scene, seed=st.integers(0, 2**32 - 1), steps=st.lists(st.floats(0.0, 3.0), min_size=1, max_size=4))
+def test_grid_incremental_stays_exact_while_objects_drift_between_cells(params, scene, seed, steps):
+    # Small random steps: most frames update the candidates rather than rebuild them.
+    positions, radii = scene
+    rng = np.random.default_rng(seed)
+    grid = engines.create("own.grid_incremental", **params)
+    grid.reset(positions, radii)
+    for step in steps:
+        positions = positions + rng.normal(0.0, step, positions.shape) * (rng.random(len(positions)) < 0.3)[:, None]
+        grid.update(positions)
+        grid.validate()
+        got = grid.pairs()
+        assert is_canonical(got, len(positions)) is None
+        assert np.array_equal(np.sort(keys(got, len(positions))), np.sort(keys(brute_pairs(positions, radii), len(positions))))
+
+
+def test_grid_incremental_updates_its_candidates_while_few_objects_change_cell():
+    scene = generate("uniform", 2000, radii=(2.0, 60.0), seed=9)  # a few objects larger than a cell
+    traj = simulate(scene, frames=8)
+    grid = engines.create("own.grid_incremental")
+    grid.reset(traj.positions[0], traj.scene.radii)
+    assert grid.stats()["rebuilt"] == 1
+    for f in range(1, traj.frames):
+        grid.update(traj.positions[f])
+        grid.validate()
+        assert grid.stats()["rebuilt"] == 0 and 0 < grid.stats()["moved"] < 100, grid.stats()
+        np.testing.assert_array_equal(np.sort(keys(grid.pairs(), 2000)), keys(traj.box_pairs[f], 2000))
+    grid.update(np.random.default_rng(0).permutation(traj.positions[1]))  # everything jumps: rebuilt
+    assert grid.stats()["rebuilt"] == 1
+    grid.validate()
+

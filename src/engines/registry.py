@@ -18,6 +18,7 @@ BACKENDS: dict[str, str] = {
     "own.sap_incremental": "own.sap:IncrementalSweepAndPrune",
     "own.sap_parallel": "own.sap:ParallelSweepAndPrune",
     "own.grid": "own.grid:UniformGrid",
+    "own.grid_incremental": "own.grid_incremental:IncrementalGrid",
     "own.quadtree": "own.quadtree:Quadtree",
     "own.bvh": "own.bvh:LinearBvh",
     "own.grid_swept": "engines.swept:SweptGrid",

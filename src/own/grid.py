@@ -83,12 +83,12 @@ def gather_centres(positions, order, xy):
 
 
 @nb.njit(cache=True)
-def grid_layout(extent, n, p, cell, max_cells, layout):
+def grid_layout(extent, n, p, cell, max_cells, layout, slack=0.0):
     """Fill `layout` for n centres spanning `extent` (centre_extents) unless the current one still
     fits; True if rebuilt.
 
-    It still fits while every centre is inside it and the centres span at least half of it on
-    each axis. p > 0 gives p x p cells over the centres' extent; otherwise square cells of size
+    It still fits while every centre is inside it, or at most `slack` cells outside (clamped into
+    the edge cells, still exactly), and the centres span at least half of it on each axis. p > 0 gives p x p cells over the centres' extent; otherwise square cells of size
     `cell` (plus the rounding margin, so a diameter of `cell` fits), enlarged until there are at
     most `max_cells`.
     """
@@ -97,7 +97,8 @@ def grid_layout(extent, n, p, cell, max_cells, layout):
     nx, ny = layout[NX], layout[NY]
     if nx > 0:
         wx, wy = nx * layout[CW], ny * layout[CH]
-        inside = x0 >= layout[OX] and y0 >= layout[OY] and x1 <= layout[OX] + wx and y1 <= layout[OY] + wy
+        ox, oy, mx, my = layout[OX], layout[OY], slack * layout[CW], slack * layout[CH]
+        inside = x0 >= ox - mx and y0 >= oy - my and x1 <= ox + wx + mx and y1 <= oy + wy + my
         if inside and (nx == 1 or sx >= 0.5 * wx) and (ny == 1 or sy >= 0.5 * wy):
             return False
     if p > 0:
@@ -209,20 +210,30 @@ def grid_pairs(ids, centres, sradii, skey, start, layout, limit, buf):
         count = scan_circles(centres, sradii, ids, a, s, e, buf, count)
     if first_large == n:
         return count, tests
-    # Large against small: the cells their box grown by a small radius covers, plus one cell on
-    # each side, which absorbs the rounding of the cell index.
+    # Large against small: the cells their box grown by a small radius covers (covered_cells).
     reach = 0.5 * max(limit, 0.0)
     for a in range(first_large, n):
-        x, y, r = centres[a, 0], centres[a, 1], sradii[a]
-        cx0 = max(cell_of(x - r - reach, ox, inv_x, last_x) - 1, 0)
-        cx1 = min(cell_of(x + r + reach, ox, inv_x, last_x) + 1, int(last_x))
-        cy0 = max(cell_of(y - r - reach, oy, inv_y, last_y) - 1, 0)
-        cy1 = min(cell_of(y + r + reach, oy, inv_y, last_y) + 1, int(last_y))
+        cx0, cx1, cy0, cy1 = covered_cells(centres[a, 0], centres[a, 1], sradii[a] + reach, layout)
         for cy in range(cy0, cy1 + 1):
             s, e = start[cy * w + cx0 + 1], start[cy * w + cx1 + 2]
             tests += e - s
             count = scan_circles(centres, sradii, ids, a, s, e, buf, count)
-    # Large against large: sweep along x; each candidate is tested as a scan of one slot.
+    return large_against_large(centres, sradii, ids, first_large, buf, count, tests)
+
+
+@nb.njit(cache=True, inline="always")
+def covered_cells(x, y, reach, layout):
+    """Cells (cx0, cx1, cy0, cy1, inclusive) that a box of half-width `reach` around (x, y)
+    covers, plus one cell on each side, which absorbs the rounding of the cell index."""
+    ox, oy, inv_x, inv_y, last_x, last_y, w, large = key_space(layout)
+    return (max(cell_of(x - reach, ox, inv_x, last_x) - 1, 0), min(cell_of(x + reach, ox, inv_x, last_x) + 1, int(last_x)),
+            max(cell_of(y - reach, oy, inv_y, last_y) - 1, 0), min(cell_of(y + reach, oy, inv_y, last_y) + 1, int(last_y)))
+
+
+@nb.njit(cache=True)
+def large_against_large(centres, sradii, ids, first_large, buf, count, tests):
+    """Pairs among slots first_large.. (the large bucket): a sweep along x, each candidate tested
+    as a scan of one slot. Returns (pairs found, pair tests), counting on from the given ones."""
     lx = centres[first_large:, 0] - sradii[first_large:]
     by_x = np.argsort(lx)
     for u in range(by_x.shape[0]):
@@ -351,14 +362,44 @@ def default_cell(radii: np.ndarray) -> float:
     return 2.0 * min(float(radii.max()), LARGE_RADIUS_IN_MEDIANS * float(np.median(radii)))
 
 
-class UniformGrid(BroadPhase):
+class CellLayout(BroadPhase):
+    """What the grids share: the `p` and `cell` parameters, checked, the layout they start, and
+    the cells for drawing. Give `p` for p x p cells over the extent (the essay's parameter) or
+    `cell` for a cell size; with neither, a cell is one diameter of the largest object, but at
+    most 4 median diameters (see `default_cell`), enlarged to at most MAX_CELLS_PER_OBJECT cells
+    per object."""
+
+    def __init__(self, **params):
+        super().__init__(**params)
+        p, cell = self.params["p"], self.params["cell"]
+        if p is not None and cell is not None:
+            raise ValueError(f"{self.name}: give p or cell, not both")
+        if p is not None:
+            self._int_param("p", 1)
+        if cell is not None and not (np.isfinite(cell) and cell > 0):
+            raise ValueError(f"{self.name}: cell must be a positive finite size, got {cell!r}")
+
+    def _start_layout(self, radii):
+        """The cell size, p and cell cap for these objects, and no layout yet."""
+        self._cell = float(self.params["cell"]) if self.params["cell"] is not None else default_cell(radii)
+        self._p = int(self.params["p"] or 0)
+        self._max_cells = MAX_CELLS_PER_OBJECT * self.n + 16
+        self._layout = np.zeros(6)
+
+    def structure(self):
+        nx, ny = int(self._layout[NX]), int(self._layout[NY])
+        ox, oy, cw, ch = self._layout[[OX, OY, CW, CH]]
+        cx, cy = np.meshgrid(np.arange(nx), np.arange(ny))
+        cx, cy = cx.ravel(), cy.ravel()
+        return {"cells": np.column_stack([ox + cx * cw, oy + cy * ch, ox + (cx + 1) * cw, oy + (cy + 1) * ch])}
+
+
+class UniformGrid(CellLayout):
     """Uniform grid of square cells over the centres, half-stencil pair search.
 
-    Give `p` for p x p cells over the extent (the essay's parameter) or `cell` for a cell size;
-    with neither, a cell is one diameter of the largest object, but at most 4 median diameters
-    (see `default_cell`), enlarged to at most MAX_CELLS_PER_OBJECT cells per object. Objects wider than a cell are
-    handled separately at a cost that grows with their area. `coherent` keeps the objects in last
-    frame's cell order (False re-sorts from the input order, to measure what coherence saves).
+    `p` and `cell` as in CellLayout. Objects wider than a cell are handled separately at a cost
+    that grows with their area. `coherent` keeps the objects in last frame's cell order (False
+    re-sorts from the input order, to measure what coherence saves).
     """
 
     name = "own.grid"
@@ -366,20 +407,10 @@ class UniformGrid(BroadPhase):
 
     def __init__(self, **params):
         super().__init__(**params)
-        p, cell = self.params["p"], self.params["cell"]
-        if p is not None and cell is not None:
-            raise ValueError("own.grid: give p or cell, not both")
-        if p is not None:
-            self._int_param("p", 1)
-        if cell is not None and not (np.isfinite(cell) and cell > 0):
-            raise ValueError(f"own.grid: cell must be a positive finite size, got {cell!r}")
         self._counters: dict[str, int] = {}
 
     def _reset(self, positions, radii):
-        self._cell = float(self.params["cell"]) if self.params["cell"] is not None else default_cell(radii)
-        self._p = int(self.params["p"] or 0)
-        self._max_cells = MAX_CELLS_PER_OBJECT * self.n + 16
-        self._layout = np.zeros(6)
+        self._start_layout(radii)
         n = self.n
         # Slot arrays (ids, centres, keys, radii), double-buffered: the build reads last frame's
         # while it writes this frame's. Work arrays are kept from frame to frame. Slots hold
@@ -429,13 +460,6 @@ class UniformGrid(BroadPhase):
             return {}
         return {"cells": int(self._layout[NX] * self._layout[NY]), "cell": float(self._layout[CW]),
                 "large": self.n - int(self._start[self._large_key()]), **self._counters}
-
-    def structure(self):
-        nx, ny = int(self._layout[NX]), int(self._layout[NY])
-        ox, oy, cw, ch = self._layout[[OX, OY, CW, CH]]
-        cx, cy = np.meshgrid(np.arange(nx), np.arange(ny))
-        cx, cy = cx.ravel(), cy.ravel()
-        return {"cells": np.column_stack([ox + cx * cw, oy + cy * ch, ox + (cx + 1) * cw, oy + (cy + 1) * ch])}
 
     def validate(self):
         nx, ny = int(self._layout[NX]), int(self._layout[NY])
