@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 import engines
 from engines.pairs import is_canonical, keys
+from own import grid_incremental
 from own.brute import brute_pairs
 from scenes import generate
 from scenes.motion import simulate
@@ -254,4 +255,18 @@ def test_grid_incremental_updates_its_candidates_while_few_objects_change_cell()
     grid.update(np.random.default_rng(0).permutation(traj.positions[1]))  # everything jumps: rebuilt
     assert grid.stats()["rebuilt"] == 1
     grid.validate()
+
+
+def test_grid_incremental_renumbers_its_objects_in_cell_order_after_enough_moves(monkeypatch):
+    monkeypatch.setattr(grid_incremental, "RENEW_AFTER_MOVES_PER_OBJECT", 0)  # after any move
+    traj = simulate(generate("uniform", 2000, seed=9), frames=4)
+    grid = engines.create("own.grid_incremental")
+    grid.reset(traj.positions[0], traj.scene.radii)
+    rebuilt = []
+    for f in range(1, traj.frames):
+        grid.update(traj.positions[f])
+        rebuilt.append(grid.stats()["rebuilt"])
+        grid.validate()
+        np.testing.assert_array_equal(np.sort(keys(grid.pairs(), 2000)), keys(traj.box_pairs[f], 2000))
+    assert rebuilt == [0, 1, 0]  # the first frame's moves make the second renumber
 

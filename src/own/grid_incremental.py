@@ -3,14 +3,15 @@
 The cells, keys and small-object limit are own.grid's, so are its guarantees. The candidates are
 every pair of small objects in neighbouring cells (the 3 x 3 block around either one); only an
 object that changed cell changes them. So a frame costs a pass over the objects to find those
-(a few per thousand in a simulation), moving them between the cells' lists, dropping their old
+(1 in 100 per frame in the essay's scene), moving them between the cells' lists, dropping their old
 candidates and listing their new neighbours, then one branch-free pass over the candidates
 testing their boxes: no sort, no per-cell work, and no loop whose length depends on a cell.
 
 Objects are numbered in cell order at each rebuild ("ranks"), and their centres are gathered in
-that order every frame, so the candidate tests read memory almost sequentially; the cell order
-ages as objects move, and a rebuild renews it. Each cell holds a doubly linked list of ranks, so
-that a mover leaves and joins a cell in O(1). Large objects (wider than the limit) are not
+that order every frame, so the candidate tests read memory almost sequentially. That order ages
+as objects move: a rebuild renews it once as many objects have changed cell as there are objects
+(every 100 frames in the essay's scene). Each cell holds a doubly linked list of ranks, so that
+a mover leaves and joins a cell in O(1). Large objects (wider than the limit) are not
 cached: they are found afresh every frame as in own.grid, which rebuilds when one stops or starts
 being large (the limit moves a little with the scene's extent).
 """
@@ -27,6 +28,9 @@ from .grid import (CellLayout, cell_key, covered_cells, gather_centres, grid_lay
 # A frame with more objects changing cell than n / this rebuilds: past that, listing every
 # mover's neighbours costs more than enumerating the candidates afresh.
 REBUILD_MOVERS_DIVISOR = 8
+# The ranks are renumbered in cell order (a rebuild) once this many times n objects have changed
+# cell since the last rebuild, so that candidate tests keep reading memory almost in order.
+RENEW_AFTER_MOVES_PER_OBJECT = 1
 # The layout is kept while the centres stay within this many cells outside it (those outside are
 # clamped into the edge cells): a new layout means a rebuild, and with none an object stepping
 # past the scene's extent, as every one at the edge does in turn, would cause one.
@@ -146,9 +150,9 @@ def incremental_update(positions, limit, layout, state, head, cand, m, movers, m
 def incremental_step(positions, radii, p, cell, max_cells, layout, state, head, cand, m, movers, moved, max_movers):
     """One call per frame (each compiled call from Python costs microseconds): the layout (own.grid's,
     kept while it fits), the small-object limit, and the ranks, lists and candidates updated, or
-    rebuilt when the layout changed or incremental_update asks for it. Returns (limit, the lists'
-    heads, candidates, objects that changed cell, rebuilt); candidates past cand's rows: grow
-    cand and call incremental_rebuild."""
+    rebuilt when the layout changed, incremental_update asks for it or m < 0 (none yet, or a
+    renewal due). Returns (limit, the lists' heads, candidates, objects that changed cell,
+    rebuilt); candidates past cand's rows: grow cand and call incremental_rebuild."""
     n = positions.shape[0]
     extent = centre_extents(positions)
     relayout = grid_layout(extent, n, p, cell, max_cells, layout, LAYOUT_SLACK_CELLS)
@@ -231,12 +235,15 @@ class IncrementalGrid(CellLayout):
         self._movers = np.empty((n, 2), dtype=np.int64)
         self._moved = np.zeros(n, dtype=np.uint8)
         self._m = -1  # no candidates yet
+        self._moves = 0  # objects that changed cell since the last rebuild
         self._update(positions)
 
     def _update(self, positions):
+        renew = self._moves > RENEW_AFTER_MOVES_PER_OBJECT * self.n
         self._limit, self._head, self._m, moved, rebuilt = incremental_step(
             positions, self.radii, self._p, self._cell, self._max_cells, self._layout, self._state, self._head,
-            self._cand, self._m, self._movers, self._moved, self.n // REBUILD_MOVERS_DIVISOR)
+            self._cand, -1 if renew else self._m, self._movers, self._moved, self.n // REBUILD_MOVERS_DIVISOR)
+        self._moves = 0 if rebuilt else self._moves + moved
         while self._m > len(self._cand):
             self._cand = np.empty((self._m + self._m // 4 + 64, 2), dtype=np.int64)
             self._m = incremental_rebuild(positions, self.radii, self._layout, self._limit, self._state, self._head,
