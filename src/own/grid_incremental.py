@@ -3,16 +3,16 @@
 The cells, keys and small-object limit are own.grid's, so are its guarantees. The candidates are
 every pair of small objects in neighbouring cells (the 3 x 3 block around either one); only an
 object that changed cell changes them. So a frame costs a pass over the objects to find those
-(1 in 100 per frame in the essay's scene), moving them between the cells' lists, dropping their old
-candidates and listing their new neighbours, then one branch-free pass over the candidates
+(1 in 100 per frame in the essay's scene), moving them between the cells' lists, dropping their
+old candidates and listing their new neighbours, then one branch-free pass over the candidates
 testing their boxes: no sort, no per-cell work, and no loop whose length depends on a cell.
 
 Objects are numbered in cell order at each rebuild ("ranks"), and their centres are gathered in
 that order every frame, so the candidate tests read memory almost sequentially. That order ages
 as objects move: a rebuild renews it once as many objects have changed cell as there are objects
 (every 100 frames in the essay's scene). Each cell holds a doubly linked list of ranks, so that
-a mover leaves and joins a cell in O(1). Large objects (wider than the limit) are not
-cached: they are found afresh every frame as in own.grid, which rebuilds when one stops or starts
+a mover leaves and joins a cell in O(1). Large objects (wider than the limit) are not cached:
+they are found afresh every frame as in own.grid, and a rebuild follows when one stops or starts
 being large (the limit moves a little with the scene's extent).
 """
 
@@ -272,10 +272,12 @@ class IncrementalGrid(CellLayout):
                 before, a = a, nxt[a]
         assert (listed == 1).all(), "a rank is not listed exactly once"
         small = np.flatnonzero(rkey < large)
-        assert (rkey[small[-1] + 1:] == large).all() if len(small) else True, "large objects are not the last ranks"
-        cx, cy = (rkey[small] - 1) % w, (rkey[small] - 1) // w
-        near = (np.abs(cx[:, None] - cx[None, :]) <= 1) & (np.abs(cy[:, None] - cy[None, :]) <= 1)
-        expected = {(int(small[i]), int(small[j])) for i, j in zip(*np.nonzero(np.triu(near, 1)))}
+        assert np.array_equal(small, np.arange(len(small))), "large objects are not the last ranks"
+        in_cell: dict[int, list[int]] = {}
+        for a in small:
+            in_cell.setdefault(int(rkey[a]), []).append(int(a))
+        expected = {(a, b) for c, ranks in in_cell.items() for a in ranks
+                    for d in (-w - 1, -w, -w + 1, -1, 0, 1, w - 1, w, w + 1) for b in in_cell.get(c + d, []) if a < b}
         got = {(int(min(a, b)), int(max(a, b))) for a, b in self._cand[:self._m]}
         assert len(got) == self._m, "a candidate is listed twice"
         assert got == expected, "the candidates are not the pairs of small objects in neighbouring cells"
