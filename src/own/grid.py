@@ -88,9 +88,9 @@ def grid_layout(extent, n, p, cell, max_cells, layout, slack=0.0):
     fits; True if rebuilt.
 
     It still fits while every centre is inside it, or at most `slack` cells outside (clamped into
-    the edge cells, still exactly), and the centres span at least half of it on each axis. p > 0 gives p x p cells over the centres' extent; otherwise square cells of size
-    `cell` (plus the rounding margin, so a diameter of `cell` fits), enlarged until there are at
-    most `max_cells`.
+    the edge cells, still exactly), and the centres span at least half of it on each axis. p > 0
+    gives p x p cells over the centres' extent; otherwise square cells of size `cell` (plus the
+    rounding margin, so a diameter of `cell` fits), enlarged until there are at most `max_cells`.
     """
     x0, y0, x1, y1 = extent
     sx, sy = x1 - x0, y1 - y0
@@ -226,8 +226,9 @@ def covered_cells(x, y, reach, layout):
     """Cells (cx0, cx1, cy0, cy1, inclusive) that a box of half-width `reach` around (x, y)
     covers, plus one cell on each side, which absorbs the rounding of the cell index."""
     ox, oy, inv_x, inv_y, last_x, last_y, w, large = key_space(layout)
-    return (max(cell_of(x - reach, ox, inv_x, last_x) - 1, 0), min(cell_of(x + reach, ox, inv_x, last_x) + 1, int(last_x)),
-            max(cell_of(y - reach, oy, inv_y, last_y) - 1, 0), min(cell_of(y + reach, oy, inv_y, last_y) + 1, int(last_y)))
+    cx0, cx1 = cell_of(x - reach, ox, inv_x, last_x), cell_of(x + reach, ox, inv_x, last_x)
+    cy0, cy1 = cell_of(y - reach, oy, inv_y, last_y), cell_of(y + reach, oy, inv_y, last_y)
+    return max(cx0 - 1, 0), min(cx1 + 1, int(last_x)), max(cy0 - 1, 0), min(cy1 + 1, int(last_y))
 
 
 @nb.njit(cache=True)

@@ -167,6 +167,14 @@ def incremental_step(positions, radii, p, cell, max_cells, layout, state, head, 
     return limit, head, incremental_rebuild(positions, radii, layout, limit, state, head, cand), n, True
 
 
+@nb.njit(cache=True, inline="always")
+def _boxes_overlap(xy, sr, a, b):
+    """Whether the boxes of ranks a and b overlap (bounds x - r, x + r, as everywhere)."""
+    x, y, r = xy[a, 0], xy[a, 1], sr[a]
+    u, v, s = xy[b, 0], xy[b, 1], sr[b]
+    return (max(x - r, u - s) <= min(x + r, u + s)) & (max(y - r, v - s) <= min(y + r, v + s))
+
+
 @nb.njit(cache=True)
 def incremental_pairs(state, head, cand, m, layout, limit, buf):
     """Box-overlap pairs into buf: the candidates tested, then the large objects found afresh.
@@ -177,11 +185,10 @@ def incremental_pairs(state, head, cand, m, layout, limit, buf):
     rows = buf.shape[0]
     for t in range(m):  # branch-free: every candidate is written at row `count`, a hit kept
         a, b = cand[t, 0], cand[t, 1]
-        x, y, r = xy[a, 0], xy[a, 1], sr[a]
-        u, v, s = xy[b, 0], xy[b, 1], sr[b]
+        hit = _boxes_overlap(xy, sr, a, b)  # loaded before the store, which the compiler cannot move them past
         if count < rows:
             buf[count, 0], buf[count, 1] = a, b
-        count += (max(x - r, u - s) <= min(x + r, u + s)) & (max(y - r, v - s) <= min(y + r, v + s))
+        count += hit
     for h in range(min(count, rows)):  # ranks to objects, for the hits only
         i, j = perm[buf[h, 0]], perm[buf[h, 1]]
         buf[h, 0], buf[h, 1] = min(i, j), max(i, j)
@@ -195,15 +202,13 @@ def incremental_pairs(state, head, cand, m, layout, limit, buf):
         return count, tests
     reach = 0.5 * max(limit, 0.0)
     for a in range(first_large, n):  # against the small objects in the cells they cover
-        x, y, r = xy[a, 0], xy[a, 1], sr[a]
-        cx0, cx1, cy0, cy1 = covered_cells(x, y, r + reach, layout)
+        cx0, cx1, cy0, cy1 = covered_cells(xy[a, 0], xy[a, 1], sr[a] + reach, layout)
         for cy in range(cy0, cy1 + 1):
             for cx in range(cx0, cx1 + 1):
                 b = head[cy * w + cx + 1 + w]
                 while b >= 0:
-                    u, v, s = xy[b, 0], xy[b, 1], sr[b]
                     emit(buf, count, perm[a], perm[b])
-                    count += (max(x - r, u - s) <= min(x + r, u + s)) & (max(y - r, v - s) <= min(y + r, v + s))
+                    count += _boxes_overlap(xy, sr, a, b)
                     tests += 1
                     b = nxt[b]
     return large_against_large(xy, sr, perm, first_large, buf, count, tests)
