@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from scenes import DISTRIBUTIONS, ESSAY_BOX, Scene, generate
 from scenes.io import SceneFileError, load_scene, save_scene
 from scenes.motion import kinetic_energy, momentum, simulate
+from scenes.scene import check_positions
 from strategies import BAD_SCENE_FILES
 
 
@@ -166,3 +169,16 @@ def test_missing_and_unreadable_files(tmp_path):
     (tmp_path / "bin.csv").write_bytes(b"\xff\xfe\x00x")
     with pytest.raises(SceneFileError, match="cannot be read"):
         load_scene(tmp_path / "bin.csv")
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.sampled_from([0.0, -1.5, 3e5, 1e154, -1e300, 1.7e308, -1.7e308, np.inf, -np.inf, np.nan]),
+                min_size=2, max_size=40).filter(lambda v: len(v) % 2 == 0))
+def test_positions_are_rejected_exactly_when_a_value_is_not_finite(values):
+    positions = np.array(values).reshape(-1, 2)
+    if np.isfinite(positions).all():  # huge finite values overflow the quick sum: checked one by one
+        assert np.array_equal(check_positions(positions), positions)
+    else:
+        row = int(np.flatnonzero(~np.isfinite(positions).all(axis=1))[0])
+        with pytest.raises(ValueError, match=f"row {row} is not finite"):
+            check_positions(positions)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
+import numba as nb
 import numpy as np
 import numpy.typing as npt
 
@@ -21,13 +22,24 @@ def check_positions(positions: object, n: int | None = None, what: str = "positi
         raise ValueError(f"{what} must have shape (n, 2), got {arr.shape}")
     if n is not None and arr.shape[0] != n:
         raise ValueError(f"{what} has {arr.shape[0]} rows but the scene has {n} objects")
-    # The sum of squares (one BLAS call, 2x cheaper than sum() at n = 2048) is finite whenever
-    # every value is, unless a value is huge (beyond 1e154): only then is each value checked.
-    flat = arr.ravel()
-    if not math.isfinite(flat.dot(flat)) and not np.isfinite(arr).all():
+    arr = np.ascontiguousarray(arr)
+    # The sum is finite whenever every value is, unless the values are huge enough to overflow
+    # it (past 1e308 / n): only then is each value checked.
+    if not math.isfinite(_sum(arr.reshape(-1))) and not np.isfinite(arr).all():
         row = int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])
         raise ValueError(f"{what} row {row} is not finite: {arr[row].tolist()} (NaN or infinite coordinates)")
-    return np.ascontiguousarray(arr)
+    return arr
+
+
+@nb.njit(cache=True, fastmath={"reassoc"})
+def _sum(values: FloatArray) -> float:
+    """Sum in any order, so that the compiler vectorises it; NaN and infinities still propagate
+    (no fast-math flag assumes them away). Every frame's positions pass through here: at n = 2048
+    it takes 0.5 us, against 0.8 for a dot product and 2.1 for ndarray.sum()."""
+    total = 0.0
+    for i in range(values.shape[0]):
+        total += values[i]
+    return total
 
 
 def check_radii(radii: object, n: int) -> FloatArray:
