@@ -2,10 +2,12 @@
 
 Uniform scenes at the essay's density (r = 10, box side scaled by sqrt(n / 2048)); the measure is
 the median per frame of the broad phase alone, `update` + `pairs`, single thread, with frames
-stepped back to back as a simulation loop calls them. Every frame's pairs are checked against the
-exact reference after the timing. The same backend's figure in the compare harness is printed
-beside it: there the pair checks between frames leave the caches cold, which costs 2 to 3x at
-n = 2048. Speed is measured here and printed, never asserted: compare the ratios on your machine.
+stepped back to back as a simulation loop calls them, in passes over the frames for at least
+--seconds; the fastest pass's median counts, and the median pass's is printed beside it to show
+how much other programs added. Every frame's pairs are checked against the exact reference after
+the timing. The same backend's figure in the compare harness is printed too: there the pair
+checks between frames leave the caches cold, which costs 2 to 3x at n = 2048. Speed is measured
+here and printed, never asserted: compare the ratios on your machine.
 
 The scenes number their objects in the random order they were generated in, so reading the
 objects' centres jumps through memory; the last column is the same motion with the objects
@@ -48,9 +50,12 @@ VARIANTS = {"own.grid": ["own.grid", "own.grid_incremental"], "own.sap": ["own.s
             "own.quadtree": ["own.quadtree"]}
 # Measured after the targets, against the SAP target, and labelled apart: it uses every core.
 PARALLEL = ("own.sap", "own.sap_parallel")
-# Passes over the frames in the tight loop; the fastest pass's median counts (other programs on a
-# shared machine only ever add time).
-PASSES = 3
+# Passes over the frames in the tight loop: at least this many, and more until --seconds have
+# passed (a few hundred at n = 2048). The fastest pass's median counts: other programs on a shared
+# machine only ever add time, and they come and go (on a shared 2-core VM the same frames took
+# 1.6x longer for seconds at a time), so a short window might not see the machine quiet at all.
+MIN_PASSES = 3
+SECONDS = 0.5
 # Our backends that keep a sorted order between frames: (parameters that sort from scratch every
 # frame, parameters that keep last frame's order and repair it).
 COHERENCE = {
@@ -60,17 +65,19 @@ COHERENCE = {
 }
 
 
-def tight_loop(backend: str, traj: Trajectory, **params) -> tuple[float, list[dict]]:
-    """Median ms of update + pairs over frames 1.. called back to back (best of PASSES), after
-    checking that every frame's pairs are exactly the box overlaps; and the backend's counters
-    after each frame of the first pass (the one that follows frame 0, as a simulation would)."""
+def tight_loop(backend: str, traj: Trajectory, seconds: float, **params) -> tuple[float, float, list[dict]]:
+    """Median ms of update + pairs over frames 1.. called back to back, in the fastest pass and
+    in the median pass (passes: MIN_PASSES, and more until `seconds` have passed), after checking
+    that every frame's pairs are exactly the box overlaps; and the backend's counters after each
+    frame of the first pass (the one that follows frame 0, as a simulation would)."""
     bp = engines.create(backend, **params)
     bp.reset(traj.positions[0], traj.scene.radii)
     bp.pairs()  # the warm-up frame: build, JIT compile
-    n, best, counters = traj.scene.n, float("inf"), []
+    n, medians, counters = traj.scene.n, [], []
+    start = time.perf_counter()
     gc.disable()  # a collection inside a timed frame would be noise, not the backend's cost
     try:
-        for _ in range(PASSES):
+        while len(medians) < MIN_PASSES or time.perf_counter() - start < seconds:
             times, found = [], []
             for f in range(1, traj.frames):
                 t0 = time.perf_counter()
@@ -80,13 +87,13 @@ def tight_loop(backend: str, traj: Trajectory, **params) -> tuple[float, list[di
                 found.append(pairs)
                 if len(counters) < traj.frames - 1:
                     counters.append(bp.stats())
-            best = min(best, float(np.median(times)))
+            medians.append(float(np.median(times)))
     finally:
         gc.enable()
     for f, pairs in enumerate(found, start=1):
         if not np.array_equal(np.sort(keys(pairs, n)), np.sort(keys(traj.box_pairs[f], n))):
             raise CliError(f"{bp.describe()} returned wrong pairs in frame {f}: not timed")
-    return best * 1e3, counters
+    return min(medians) * 1e3, float(np.median(medians)) * 1e3, counters
 
 
 def spatial_order(positions: np.ndarray) -> np.ndarray:
@@ -108,24 +115,25 @@ def _trajectory(n: int, frames: int) -> Trajectory:
     return simulate(at_essay_density("uniform", n), (frames if n <= 131072 else max(2, frames // 3)) + 1)
 
 
-def print_targets(trajectories) -> None:
+def print_targets(trajectories, seconds: float) -> None:
     print(f"{'n':>9} {'backend':<14} {'variant':<20} {'threads':>7} {'measured ms':>12} {'target ms':>10} "
-          f"{'measured/target':>16} {'in harness ms':>14} {'spatial order ms':>17}")
+          f"{'measured/target':>16} {'median pass ms':>15} {'in harness ms':>14} {'spatial order ms':>17}")
     for traj in trajectories:
         n = traj.scene.n
         in_space = traj.renumbered(spatial_order(traj.positions[0]))
         rows = [(backend, VARIANTS[backend], 1, target) for backend, target in TARGETS_MS[n].items()]
         rows.append((PARALLEL[0], [PARALLEL[1]], threads(), TARGETS_MS[n][PARALLEL[0]]))
         for backend, variants, used, target in rows:
-            measured = {v: tight_loop(v, traj)[0] for v in variants}
+            measured = {v: tight_loop(v, traj, seconds)[:2] for v in variants}
             best = min(measured, key=measured.get)
-            print(f"{n:>9} {backend:<14} {best:<20} {used:>7} {measured[best]:>12.3f} {target:>10.3f} "
-                  f"{measured[best] / target:>15.1f}x {harness_ms(best, traj):>14.3f} "
-                  f"{tight_loop(best, in_space)[0]:>17.3f}")
+            fastest, median = measured[best]
+            print(f"{n:>9} {backend:<14} {best:<20} {used:>7} {fastest:>12.3f} {target:>10.3f} "
+                  f"{fastest / target:>15.1f}x {median:>15.3f} {harness_ms(best, traj):>14.3f} "
+                  f"{tight_loop(best, in_space, seconds)[0]:>17.3f}")
             sys.stdout.flush()
 
 
-def print_coherence(trajectories) -> None:
+def print_coherence(trajectories, seconds: float) -> None:
     """Each of COHERENCE's backends from scratch and coherent, side by side in one run, with the
     repair's work: frames it repaired (the others it sorted afresh, as -1 swaps say), the median
     rows or entries its insertion sort moved in those, and for the grid the objects that changed cell."""
@@ -134,8 +142,8 @@ def print_coherence(trajectories) -> None:
     for traj in trajectories:
         n, frames = traj.scene.n, traj.frames - 1
         for backend, (scratch, coherent) in COHERENCE.items():
-            scratch_ms, _ = tight_loop(backend, traj, **scratch)
-            coherent_ms, counters = tight_loop(backend, traj, **coherent)
+            scratch_ms, _, _ = tight_loop(backend, traj, seconds, **scratch)
+            coherent_ms, _, counters = tight_loop(backend, traj, seconds, **coherent)
             swaps = [c["swaps"] for c in counters if c["swaps"] >= 0]
             moved_by_repair = f"{np.median(swaps):.0f}" if swaps else "-"
             changed_cell = f"{np.median([c['moved'] for c in counters]):.0f}" if "moved" in counters[0] else "-"
@@ -148,17 +156,22 @@ def main(argv: list[str] | None = None) -> int:
     p = Parser(prog="python -m studies.bench", description=__doc__.split("\n\n")[0])
     p.add_argument("--quick", action="store_true", help="only n = 2048")
     p.add_argument("--frames", type=int, default=10, help="timed frames per size (default 10)")
+    p.add_argument("--seconds", type=float, default=SECONDS,
+                   help=f"time each measurement for at least this long, in passes over the frames; the fastest "
+                        f"pass counts (default {SECONDS})")
     p.add_argument("--coherence", action="store_true",
                    help="time each sorted structure from scratch against repaired from last frame's order")
     args = p.parse_args(argv)
     if args.frames < 1:
         raise CliError("--frames must be at least 1")
+    if not 0 <= args.seconds < float("inf"):
+        raise CliError("--seconds must be a finite number >= 0")
     sizes = [2048] if args.quick else list(TARGETS_MS)
     trajectories = (_trajectory(n, args.frames) for n in sizes)
     if args.coherence:
-        print_coherence(trajectories)
+        print_coherence(trajectories, args.seconds)
     else:
-        print_targets(trajectories)
+        print_targets(trajectories, args.seconds)
     return 0
 
 
