@@ -270,3 +270,18 @@ def test_grid_incremental_renumbers_its_objects_in_cell_order_after_enough_moves
         np.testing.assert_array_equal(np.sort(keys(grid.pairs(), 2000)), keys(traj.box_pairs[f], 2000))
     assert rebuilt == [0, 1, 0]  # the first frame's moves make the second renumber
 
+
+
+def test_grid_incremental_rebuilds_into_a_larger_grid_when_the_scene_spreads_out():
+    positions = np.random.default_rng(4).uniform(0.0, 60.0, (1000, 2))
+    radii = np.full(1000, 1.0)
+    grid = engines.create("own.grid_incremental")
+    grid.reset(positions, radii)
+    cells = len(grid.structure()["cells"])
+    for spread in (1.5, 2.0, 2.0):  # every frame outgrows the layout's slack: a new layout, more cells
+        positions = positions * spread
+        grid.update(positions)
+        assert grid.stats()["rebuilt"] == 1 and len(grid.structure()["cells"]) > cells
+        cells = len(grid.structure()["cells"])
+        grid.validate()
+        assert np.array_equal(np.sort(keys(grid.pairs(), 1000)), np.sort(keys(brute_pairs(positions, radii), 1000)))
