@@ -51,11 +51,12 @@ VARIANTS = {"own.grid": ["own.grid", "own.grid_incremental"], "own.sap": ["own.s
 # Measured after the targets, against the SAP target, and labelled apart: it uses every core.
 PARALLEL = ("own.sap", "own.sap_parallel")
 # Passes over the frames in the tight loop: at least this many, and more until --seconds have
-# passed (a few hundred at n = 2048). The fastest pass's median counts: other programs on a shared
-# machine only ever add time, and they come and go (on a shared 2-core VM the same frames took
-# 1.6x longer for seconds at a time), so a short window might not see the machine quiet at all.
+# passed (thousands at n = 2048). The fastest pass's median counts: other programs on a shared
+# machine only ever add time, and they come and go. On a shared 2-core VM most passes took 1.6x
+# longer than the quiet ones, and once 1.25 s went by without a quiet pass: a short window may
+# not see the machine quiet at all.
 MIN_PASSES = 3
-SECONDS = 0.5
+SECONDS = 2.0
 # Our backends that keep a sorted order between frames: (parameters that sort from scratch every
 # frame, parameters that keep last frame's order and repair it).
 COHERENCE = {
