@@ -271,7 +271,6 @@ def test_grid_incremental_renumbers_its_objects_in_cell_order_after_enough_moves
     assert rebuilt == [0, 1, 0]  # the first frame's moves make the second renumber
 
 
-
 def test_grid_incremental_rebuilds_into_a_larger_grid_when_the_scene_spreads_out():
     positions = np.random.default_rng(4).uniform(0.0, 60.0, (1000, 2))
     radii = np.full(1000, 1.0)
