@@ -13,6 +13,7 @@ from own import grid_incremental
 from own.brute import brute_pairs
 from scenes import generate
 from scenes.motion import simulate
+from scenes.stress import STRESS_SCENES
 from strategies import BOUNDARY, any_scene
 
 # (backend, params): every exact backend with the parameter settings that change its code paths.
@@ -23,7 +24,11 @@ EXACT = [
     ("own.sap", {"axis": "auto"}),
     ("own.sap_incremental", {}),
     ("own.sap", {"axis": "x", "incremental": True}),
+    ("own.sap", {"sweep": "plain"}),
+    ("own.sap", {"sweep": "sparse"}),
+    ("own.sap", {"axis": "x", "incremental": True, "sweep": "sparse"}),
     ("own.sap_parallel", {"parallel_from": 0}),  # every sweep parallel, however small
+    ("own.sap_parallel", {"parallel_from": 0, "sweep": "sparse"}),
     ("own.sap", {"axis": "y", "parallel": True, "parallel_from": 0}),
     ("own.grid", {}),
     ("own.grid", {"p": 1}),
@@ -193,6 +198,37 @@ def test_grid_repairs_its_slots_while_few_objects_change_cell_and_counts_afresh_
         assert grid.stats()["relayout"] == 0
         grid.validate()
         assert set(map(tuple, grid.pairs().tolist())) == set(map(tuple, brute_pairs(positions, radii).tolist()))
+
+
+@pytest.mark.parametrize(("dist", "sweep"), [("uniform", "sparse"), ("clusters", "plain")])
+def test_sap_picks_its_sweep_from_last_frames_pairs_per_object(dist, sweep):
+    # The essay's scenes: 0.4 pairs per object when uniform, 3.6 when clustered.
+    traj = simulate(generate(dist, 2048, seed=1), frames=3)
+    n = traj.scene.n
+    sap = engines.create("own.sap")
+    sap.reset(traj.positions[0], traj.scene.radii)
+    assert sap.stats()["sparse_sweep"] == 0  # no pairs counted yet
+    sap.pairs()
+    for f in (1, 2):
+        sap.update(traj.positions[f])
+        assert sap.stats()["sparse_sweep"] == (sweep == "sparse")
+        np.testing.assert_array_equal(np.sort(keys(sap.pairs(), n)), keys(traj.box_pairs[f], n))
+
+
+def test_sap_sweeps_plain_once_float32_cannot_tell_the_objects_apart():
+    # The essay scene 1e12 from the origin: float32 steps there are 65536 wide, so every object of
+    # a window looks like a hit to the sparse sweep.
+    traj = simulate(STRESS_SCENES["shift_1e12"](), frames=4)
+    n = traj.scene.n
+    sap = engines.create("own.sap")
+    sap.reset(traj.positions[0], traj.scene.radii)
+    sap.pairs()
+    used = []
+    for f in range(1, traj.frames):
+        sap.update(traj.positions[f])
+        np.testing.assert_array_equal(np.sort(keys(sap.pairs(), n)), keys(traj.box_pairs[f], n))
+        used.append((sap.stats()["sparse_sweep"], sap.stats()["crowded_windows"] > n // 2))
+    assert used == [(1, True), (0, False), (0, False)]
 
 
 @pytest.mark.parametrize(("name", "params"), [("own.sap", {}), ("own.grid", {"coherent": False}),

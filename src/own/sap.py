@@ -12,14 +12,25 @@ from .parallel import ChunkedPairCollector
 from .radix import radix_argsort, sortable_bits
 
 AXES = ("x", "y", "auto")
+SWEEPS = ("auto", "plain", "sparse")
 # An insertion-sort repair that needs more swaps than this many per object gives up and sorts
 # from scratch: coherence only pays while objects move little between frames.
 MAX_SWAPS_PER_OBJECT = 8
 # A sweep window with at most this many hits emits them from the span between its first and last
 # hit; one with more, chunk by chunk (see _sweep_range). 2, 4 and 8 hits measured alike; chunks of
-# 32 were 1.15x faster than 64 on the clustered scene at n = 131072.
+# 32 were 1.15x faster than 64 on the clustered scene at n = 131072. The sparse sweep bisects
+# windows with at most this many hits and hands the others to _sweep_range.
 FEW_HITS = 4
 SWEEP_CHUNK = 32
+# Sweep with sap_sweep_sparse while last frame found at most this many pairs per object. At the
+# essay's density it swept 1.2x faster than sap_sweep at n = 2048 (0.4 pairs per object), 1.4x at
+# 131072 and 1.7x at 2^20, and 1.1-1.5x on the Gaussian scenes (1.2 pairs per object); on the
+# clustered ones (3.6 to 45) 1.6x slower.
+SPARSE_PAIRS_PER_OBJECT = 2
+# ... unless more than 1 window in this many was crowded (see sap_sweep_sparse) the last time it ran.
+MAX_CROWDED_SHARE = 32
+# sap_sweep_sparse numbers a window's objects in int32.
+MAX_SPARSE_N = 2**31 - 1
 # Default `parallel_from`: a parallel sweep runs on every core only once last frame's had this
 # many sweep-axis overlaps (its work). Handing chunks to the other thread costs 0.5 to 1 ms a
 # call on a shared 2-core machine, measured to pay from about 2^23 (n = 65536 at the essay's
@@ -41,8 +52,9 @@ def _y_varies_more(positions: np.ndarray) -> bool:
 
 
 @nb.njit(cache=True)
-def sap_prepare(positions, radii, axis_mode, last_order, incremental, order, work, sorted_bounds):
-    """Sort for this frame's sweep into `order` and `sorted_bounds` (s_lo, s_hi, o_lo, o_hi).
+def sap_prepare(positions, radii, axis_mode, last_order, incremental, order, work, sorted_bounds, bounds32):
+    """Sort for this frame's sweep into `order` and `sorted_bounds` (s_lo, s_hi, o_lo, o_hi), and
+    into `bounds32` (o_lo, o_hi rounded to float32) unless it is empty.
 
     axis_mode: 0 x, 1 y, 2 largest variance. With `incremental`, `last_order` (last frame's, its
     axis in its last entry, -1 before the first frame) is repaired by insertion sort when the axis
@@ -79,6 +91,8 @@ def sap_prepare(positions, radii, axis_mode, last_order, incremental, order, wor
         r = sr[j]
         s_lo[a], s_hi[a] = xy[j, axis] - r, xy[j, axis] + r
         o_lo[a], o_hi[a] = xy[j, other] - r, xy[j, other] + r
+    if bounds32.size:
+        bounds32[0], bounds32[1] = o_lo, o_hi
     return axis, swaps
 
 
@@ -160,16 +174,75 @@ def sap_sweep(order, s_lo, s_hi, o_lo, o_hi, buf):
     return _sweep_range(order, s_lo, s_hi, o_lo, o_hi, 0, s_lo.shape[0], buf)
 
 
+@nb.njit(cache=True)
+def sap_sweep_sparse(order, s_lo, s_hi, o_lo, o_hi, bounds32, ramp, a0, a1, buf):
+    """sap_sweep for scenes where most windows hold at most one hit, over sorted slots a0..a1-1
+    (a parameter: a wrapper that inlined this sweep measured up to 1.3x slower); returns (pairs
+    found, pairs overlapping on the sweep axis, crowded windows: those with more than FEW_HITS
+    hits in float32).
+
+    Each window's hits on the other axis are tallied on its bounds rounded to float32, 8 to a
+    vector instead of 4: never fewer than the exact hits, as rounding is monotonic (a <= b in
+    float64 stays so in float32; the far side of float32's range rounds to infinity, which keeps
+    order too). The tally also sums the hits' positions in the window (`ramp` holds 1, 2, 3, ...).
+    A window with one hit gets its position from that sum: it is tested exactly and emitted, with
+    no pass to find it. One with a few is cut in halves, first halves first, until each piece
+    holds at most one; one with more is swept by _sweep_range, as the bisection would cost more
+    than it saves.
+
+    The tallies are int32, cast back at every step so that they stay in 8 lanes like the bounds
+    (numba widens integer sums to int64, which splits every vector in two: slower than the
+    float64 sweep). The positions' sum may wrap around; it is only read when it holds one position.
+    """
+    lo32, hi32 = bounds32[0], bounds32[1]
+    none = np.int32(0)
+    count = 0
+    axis_hits = crowded = 0
+    end, prev_top = 0, -np.inf
+    for a in range(a0, a1):
+        top = s_hi[a]
+        end = _window_end(s_lo, a, top, end, prev_top)
+        prev_top = top
+        axis_hits += end - a - 1
+        lo_af, hi_af = lo32[a], hi32[a]
+        s, e = a + 1, end  # the piece of the window being tallied
+        while s < end:
+            lo_f, hi_f = lo32[s:e], hi32[s:e]
+            hits = place = none
+            for t in range(e - s):
+                hit = (lo_f[t] <= hi_af) & (hi_f[t] >= lo_af)
+                hits = np.int32(hits + np.int32(hit))
+                place = np.int32(place + (ramp[t] if hit else none))
+            if hits > FEW_HITS and e - s == end - a - 1:
+                count += _sweep_range(order, s_lo, s_hi, o_lo, o_hi, a, a + 1, buf[count:])[0]
+                crowded += 1
+                break
+            if hits > 1:
+                e = s + (e - s) // 2
+                continue
+            if hits:
+                b = s + place - 1
+                emit(buf, count, order[a], order[b])
+                count += (o_lo[b] <= o_hi[a]) & (o_hi[b] >= o_lo[a])
+            s, e = e, end
+    return count, axis_hits, crowded
+
+
 @nb.njit(cache=True, parallel=True)
-def sap_sweep_parallel(order, s_lo, s_hi, o_lo, o_hi, bufs):
-    """sap_sweep with the objects split into one chunk per row of bufs, swept in parallel (each
-    window is independent); returns (pairs per chunk, sweep-axis overlaps per chunk)."""
+def sap_sweep_parallel(order, s_lo, s_hi, o_lo, o_hi, bounds32, ramp, bufs):
+    """sap_sweep, or sap_sweep_sparse unless bounds32 is empty, with the objects split into one
+    chunk per row of bufs, swept in parallel (each window is independent); returns (pairs per
+    chunk, sweep-axis overlaps per chunk, crowded windows per chunk)."""
     chunks, n = bufs.shape[0], s_lo.shape[0]
-    counts, axis_hits = np.zeros(chunks, dtype=np.int64), np.zeros(chunks, dtype=np.int64)
+    counts, axis_hits, crowded = (np.zeros(chunks, dtype=np.int64) for _ in range(3))
     for c in nb.prange(chunks):
-        counts[c], axis_hits[c] = _sweep_range(order, s_lo, s_hi, o_lo, o_hi, c * n // chunks,
-                                               (c + 1) * n // chunks, bufs[c])
-    return counts, axis_hits
+        a0, a1 = c * n // chunks, (c + 1) * n // chunks
+        if bounds32.size:
+            counts[c], axis_hits[c], crowded[c] = sap_sweep_sparse(order, s_lo, s_hi, o_lo, o_hi, bounds32, ramp,
+                                                                   a0, a1, bufs[c])
+        else:
+            counts[c], axis_hits[c] = _sweep_range(order, s_lo, s_hi, o_lo, o_hi, a0, a1, bufs[c])
+    return counts, axis_hits, crowded
 
 
 class SweepAndPrune(BroadPhase):
@@ -178,51 +251,87 @@ class SweepAndPrune(BroadPhase):
     Emits only pairs whose boxes overlap on both axes. Cost grows with the number of pairs that
     overlap on the sweep axis alone, so clumping along that axis hurts; "auto" avoids the worse
     one. With `incremental`, the sorted order is kept between frames and repaired by insertion
-    sort, which costs O(n) while objects move little (temporal coherence). `parallel` sweeps on
-    every core once last frame's sweep had `parallel_from` sweep-axis overlaps (the sort stays
-    single-threaded).
+    sort, which costs O(n) while objects move little (temporal coherence). `sweep` is "plain"
+    (sap_sweep), "sparse" (sap_sweep_sparse) or "auto": sparse while last frame found at most
+    SPARSE_PAIRS_PER_OBJECT pairs per object, and float32 told the objects apart so far.
+    `parallel` sweeps on every core once last frame's sweep had `parallel_from` sweep-axis
+    overlaps (the sort stays single-threaded).
     """
 
     name = "own.sap"
-    defaults = {"axis": "auto", "incremental": False, "parallel": False, "parallel_from": PARALLEL_FROM_OVERLAPS}
+    defaults = {"axis": "auto", "incremental": False, "sweep": "auto", "parallel": False,
+                "parallel_from": PARALLEL_FROM_OVERLAPS}
 
     def __init__(self, **params):
         super().__init__(**params)
-        if self.params["axis"] not in AXES:
-            raise ValueError(f"{self.name}: axis must be one of {', '.join(AXES)}, got {self.params['axis']!r}")
+        for key, allowed in (("axis", AXES), ("sweep", SWEEPS)):
+            if self.params[key] not in allowed:
+                raise ValueError(f"{self.name}: {key} must be one of {', '.join(allowed)}, got {self.params[key]!r}")
         self._axis_mode = AXES.index(self.params["axis"])
         self._incremental = bool(self.params["incremental"])
         self._parallel_from = self._int_param("parallel_from", 0)
         self._collect = PairCollector()
         self._collect_chunks = ChunkedPairCollector() if self.params["parallel"] else None
-        self._last_overlaps = 0
 
     def _reset(self, positions, radii):
         n = self.n
+        # The last scene's counts are no guide to this one.
+        self._last_pairs, self._last_overlaps, self._float32_too_coarse = None, 0, False
         # The order is double-buffered (the repair reads last frame's while it writes this
         # frame's); its last entry is its axis, none yet. Every work array is kept between frames.
         self._order, self._spare_order = np.full(n + 1, -1, dtype=np.int64), np.empty(n + 1, dtype=np.int64)
         self._work = (np.empty((n, 2)), np.empty(n), np.empty(n), np.empty(n, dtype=np.int64))
         self._sorted = tuple(np.empty(n) for _ in range(4))
+        # The sparse sweep's float32 bounds, filled only in frames that use it (an empty pair of
+        # rows in the others), and the window positions it sums.
+        self._bounds32, self._no_bounds32 = np.empty((2, n), dtype=np.float32), np.empty((2, 0), dtype=np.float32)
+        self._ramp = np.arange(1, min(n, MAX_SPARSE_N) + 1, dtype=np.int32)
+        # Load (or compile) the sweeps now, in the untimed build: else the first frame that uses
+        # one pays for it (for the parallel one, 4 s with a cold cache, and starting the threads).
+        nothing, no_order = np.empty(0), np.empty(0, dtype=np.int64)
+        self._collect(sap_sweep_sparse, no_order, nothing, nothing, nothing, nothing, self._no_bounds32, self._ramp,
+                      0, 0)
         if self._collect_chunks is not None:
-            # Load (or compile) the parallel sweep and start the threads now, in the untimed build:
-            # else the first frame past parallel_from pays for it (4 s with a cold cache).
-            nothing = np.empty(0)
-            self._collect_chunks(sap_sweep_parallel, np.empty(0, dtype=np.int64), nothing, nothing, nothing, nothing)
+            self._collect_chunks(sap_sweep_parallel, no_order, nothing, nothing, nothing, nothing,
+                                 self._no_bounds32, self._ramp)
         self._update(positions)
 
+    def _sparse_sweep(self) -> bool:
+        """Whether this frame sweeps with sap_sweep_sparse: pair counts change little between frames."""
+        mode, n = self.params["sweep"], self.n
+        if n > MAX_SPARSE_N or mode == "plain":
+            return False
+        if mode == "sparse":
+            return True
+        return (self._last_pairs is not None and self._last_pairs <= SPARSE_PAIRS_PER_OBJECT * n
+                and not self._float32_too_coarse)
+
     def _update(self, positions):
+        self._sparse = self._sparse_sweep()
         axis, swaps = sap_prepare(positions, self.radii, self._axis_mode, self._order, self._incremental,
-                                  self._spare_order, self._work, self._sorted)
+                                  self._spare_order, self._work, self._sorted,
+                                  self._bounds32 if self._sparse else self._no_bounds32)
         self._order, self._spare_order = self._spare_order, self._order
-        self._stats = {"axis": axis, "swaps": swaps}
+        self._stats = {"axis": axis, "swaps": swaps, "sparse_sweep": int(self._sparse), "crowded_windows": 0}
 
     def _pairs(self):
+        order, bounds32 = self._order[:self.n], self._bounds32 if self._sparse else self._no_bounds32
+        crowded = 0
         if self._collect_chunks is not None and self._last_overlaps >= self._parallel_from:
-            out, (axis_hits,) = self._collect_chunks(sap_sweep_parallel, self._order[:self.n], *self._sorted)
+            out, (axis_hits, crowded) = self._collect_chunks(sap_sweep_parallel, order, *self._sorted, bounds32,
+                                                             self._ramp)
+        elif self._sparse:
+            out, (axis_hits, crowded) = self._collect(sap_sweep_sparse, order, *self._sorted, bounds32, self._ramp,
+                                                      0, self.n)
         else:
-            out, (axis_hits,) = self._collect(sap_sweep, self._order[:self.n], *self._sorted)
+            out, (axis_hits,) = self._collect(sap_sweep, order, *self._sorted)
         self._stats["axis_overlaps"] = self._last_overlaps = axis_hits
+        self._stats["crowded_windows"] = crowded
+        self._last_pairs = len(out)
+        # Float32 cannot tell the objects apart (coordinates far larger than the gaps between
+        # them): the sparse sweep hands most windows on, at up to 2.6x the plain sweep's cost. Sweep
+        # plain until the next reset.
+        self._float32_too_coarse |= crowded * MAX_CROWDED_SHARE > self.n
         return out
 
     def structure(self):
@@ -239,7 +348,8 @@ class IncrementalSweepAndPrune(SweepAndPrune):
     """Sweep and prune that keeps its sorted order between frames (insertion-sort repair)."""
 
     name = "own.sap_incremental"
-    defaults = {"axis": "auto", "incremental": True, "parallel": False, "parallel_from": PARALLEL_FROM_OVERLAPS}
+    defaults = {"axis": "auto", "incremental": True, "sweep": "auto", "parallel": False,
+                "parallel_from": PARALLEL_FROM_OVERLAPS}
 
 
 class ParallelSweepAndPrune(SweepAndPrune):
@@ -247,4 +357,5 @@ class ParallelSweepAndPrune(SweepAndPrune):
     uses more than one thread: compare its figures with that in mind)."""
 
     name = "own.sap_parallel"
-    defaults = {"axis": "auto", "incremental": True, "parallel": True, "parallel_from": PARALLEL_FROM_OVERLAPS}
+    defaults = {"axis": "auto", "incremental": True, "sweep": "auto", "parallel": True,
+                "parallel_from": PARALLEL_FROM_OVERLAPS}
