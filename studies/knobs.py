@@ -42,6 +42,7 @@ def _fixed(values: list[Any]) -> Callable[[Scene], list[Any]]:
 GRID_CELL_FACTORS = (0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 3.0, 4.0, 6.0)
 HASH_DIM_FACTORS = (0.5, 1.0, 2.0, 3.0, 4.0, 6.0)
 AXES = _fixed(["x", "y", "auto"])
+SAP_KNOBS = [Knob("axis", AXES, "sweep axis"), Knob("sweep", _fixed(["plain", "sparse", "auto"]), "sweep")]
 GRID_CELL = Knob("cell", _sizes(lambda s: default_cell(s.radii) or _mean_diameter(s), GRID_CELL_FACTORS),
                  "requested cell size")
 
@@ -51,9 +52,9 @@ KNOBS: dict[str, list[Knob]] = {
     "own.quadtree": [Knob("capacity", _fixed([1, 2, 4, 8, 16, 32, 64]), "capacity (objects per leaf)"),
                      Knob("max_depth", _fixed([4, 6, 8, 10, 12, 16, 24]), "maximum depth")],
     "own.bvh": [Knob("leaf_size", _fixed([1, 2, 4, 8, 16]), "objects per leaf")],
-    "own.sap": [Knob("axis", AXES, "sweep axis")],
-    "own.sap_incremental": [Knob("axis", AXES, "sweep axis")],
-    "own.sap_parallel": [Knob("axis", AXES, "sweep axis")],
+    "own.sap": SAP_KNOBS,
+    "own.sap_incremental": SAP_KNOBS,
+    "own.sap_parallel": SAP_KNOBS,
     "chipmunk.hash": [Knob("dim", _sizes(_mean_diameter, HASH_DIM_FACTORS), "hash cell size dim"),
                       Knob("count", lambda s: [max(1000, int(f * s.n)) for f in (1, 3, 10, 30)], "hash table size count")],
     "coal.hash": [Knob("cell", _sizes(_mean_diameter, HASH_DIM_FACTORS), "hash cell size")],

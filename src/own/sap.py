@@ -213,7 +213,7 @@ def sap_sweep_sparse(order, s_lo, s_hi, o_lo, o_hi, bounds32, ramp, a0, a1, buf)
                 hit = (lo_f[t] <= hi_af) & (hi_f[t] >= lo_af)
                 hits = np.int32(hits + np.int32(hit))
                 place = np.int32(place + (ramp[t] if hit else none))
-            if hits > FEW_HITS and e - s == end - a - 1:
+            if hits > FEW_HITS and e - s == end - a - 1:  # a crowded window (this is all of it)
                 count += _sweep_range(order, s_lo, s_hi, o_lo, o_hi, a, a + 1, buf[count:])[0]
                 crowded += 1
                 break
@@ -234,7 +234,7 @@ def sap_sweep_parallel(order, s_lo, s_hi, o_lo, o_hi, bounds32, ramp, bufs):
     chunk per row of bufs, swept in parallel (each window is independent); returns (pairs per
     chunk, sweep-axis overlaps per chunk, crowded windows per chunk)."""
     chunks, n = bufs.shape[0], s_lo.shape[0]
-    counts, axis_hits, crowded = (np.zeros(chunks, dtype=np.int64) for _ in range(3))
+    counts, axis_hits, crowded = np.zeros((3, chunks), dtype=np.int64)
     for c in nb.prange(chunks):
         a0, a1 = c * n // chunks, (c + 1) * n // chunks
         if bounds32.size:
