@@ -152,7 +152,9 @@ def _child(job: Job, conn) -> None:
             rows = measure(job, _TRAJECTORY, r)
             conn.send(("rows", rows))
             if rows and rows[-1]["status"] != "ok":  # over budget: no further repeats
-                conn.send(("failed", rows[-1]["status"]))
+                # The repeats before it stand: say so, or a table row would contradict its note.
+                kept = f" (in repeat {r + 1} of {job.repeats}; earlier repeats' rows are kept)" if r else ""
+                conn.send(("failed", rows[-1]["status"] + kept))
                 return
         conn.send(("done", None))
     except InvalidOutput as exc:

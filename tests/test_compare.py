@@ -153,9 +153,23 @@ class Hog(Brute):
         return np.ones(10**10)
 
 
+class SlowFromTheSecondRepeat(Brute):
+    name = "test.slow_later"
+    built = 0  # per process: the child builds one backend per repeat
+
+    def _reset(self, positions, radii):
+        SlowFromTheSecondRepeat.built += 1
+        super()._reset(positions, radii)
+
+    def _pairs(self):
+        if SlowFromTheSecondRepeat.built > 1:
+            time.sleep(0.05)
+        return super()._pairs()
+
+
 @pytest.fixture
 def misbehaving(monkeypatch):
-    for cls in (Crashes, Hangs, Fails, Backwards, NotANumber, Hog):
+    for cls in (Crashes, Hangs, Fails, Backwards, NotANumber, Hog, SlowFromTheSecondRepeat):
         monkeypatch.setitem(registry.BACKENDS, cls.name, f"{__name__}:{cls.__name__}")
     registry._load.cache_clear()
     yield
@@ -208,6 +222,13 @@ def test_a_slow_backend_is_skipped_by_the_budget(small_trajectory):
     outcome = run_isolated(Job("essay.grid", repeats=3, budget_s=1e-9), small_trajectory)
     assert outcome.status.startswith("skipped: a frame took")
     assert [r["status"] for r in outcome.rows] == [outcome.status]
+
+
+def test_a_backend_over_budget_in_a_later_repeat_says_its_earlier_rows_are_kept(misbehaving, small_trajectory):
+    outcome = run_isolated(Job("test.slow_later", repeats=3, budget_s=0.02), small_trajectory)
+    assert outcome.status.startswith("skipped: a frame took")
+    assert outcome.status.endswith("(in repeat 2 of 3; earlier repeats' rows are kept)")
+    assert [r["status"] for r in outcome.rows] == ["ok"] * (small_trajectory.frames - 1) + [outcome.rows[-1]["status"]]
 
 
 def test_crash_in_a_real_engine_does_not_stop_the_study(tmp_path):
