@@ -27,8 +27,8 @@ SWEEP_CHUNK = 32
 # 131072 and 1.7x at 2^20, and 1.1-1.5x on the Gaussian scenes (1.2 pairs per object); on the
 # clustered ones (3.6 to 45) 1.6x slower.
 SPARSE_PAIRS_PER_OBJECT = 2
-# ... unless more than 1 window in this many was crowded (see sap_sweep_sparse) the last time it ran.
-MAX_CROWDED_SHARE = 32
+# ... unless more than this share of its windows were crowded (see sap_sweep_sparse) when it ran.
+MAX_CROWDED_SHARE = 1 / 32
 # sap_sweep_sparse numbers a window's objects in int32.
 MAX_SPARSE_N = 2**31 - 1
 # Default `parallel_from`: a parallel sweep runs on every core only once last frame's had this
@@ -331,7 +331,7 @@ class SweepAndPrune(BroadPhase):
         # Float32 cannot tell the objects apart (coordinates far larger than the gaps between
         # them): the sparse sweep hands most windows on, at up to 2.6x the plain sweep's cost. Sweep
         # plain until the next reset.
-        self._float32_too_coarse |= crowded * MAX_CROWDED_SHARE > self.n
+        self._float32_too_coarse |= crowded > MAX_CROWDED_SHARE * self.n
         return out
 
     def structure(self):
