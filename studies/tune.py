@@ -25,6 +25,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from own.grid import MAX_CELLS_PER_OBJECT  # noqa: E402
+from own.sap import SPARSE_PAIRS_PER_OBJECT  # noqa: E402
 from scenes import generate  # noqa: E402
 from scenes.motion import simulate  # noqa: E402
 
@@ -253,7 +254,8 @@ def write_tuning_md(table: pd.DataFrame, curves: pd.DataFrame, path: Path, args)
         "- `own.grid`: cell = one diameter of the largest radius, capped at 4 median radii, then",
         f"  enlarged until there are at most {MAX_CELLS_PER_OBJECT} cells per object (`default_cell`, `MAX_CELLS_PER_OBJECT`).",
         "- `own.quadtree`: capacity 32, maximum depth 16.",
-        "- `own.sap`: the axis along which the centres vary most.",
+        "- `own.sap`: the axis along which the centres vary most; the sparse sweep while last frame found at",
+        f"  most {SPARSE_PAIRS_PER_OBJECT} pairs per object (`SPARSE_PAIRS_PER_OBJECT`) and float32 tells the objects apart.",
         "",
         "![time against each knob, relative to the best on each scene](figures/tuning_rules.png)",
         "",
