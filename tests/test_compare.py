@@ -163,7 +163,7 @@ class SlowFromTheSecondRepeat(Brute):
 
     def _pairs(self):
         if SlowFromTheSecondRepeat.built > 1:
-            time.sleep(0.05)
+            time.sleep(0.2)
         return super()._pairs()
 
 
@@ -225,7 +225,7 @@ def test_a_slow_backend_is_skipped_by_the_budget(small_trajectory):
 
 
 def test_a_backend_over_budget_in_a_later_repeat_says_its_earlier_rows_are_kept(misbehaving, small_trajectory):
-    outcome = run_isolated(Job("test.slow_later", repeats=3, budget_s=0.02), small_trajectory)
+    outcome = run_isolated(Job("test.slow_later", repeats=3, budget_s=0.04), small_trajectory)
     assert outcome.status.startswith("skipped: a frame took")
     assert outcome.status.endswith("(in repeat 2 of 3; earlier repeats' rows are kept)")
     assert [r["status"] for r in outcome.rows] == ["ok"] * (small_trajectory.frames - 1) + [outcome.rows[-1]["status"]]
