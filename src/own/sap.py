@@ -283,14 +283,17 @@ class SweepAndPrune(BroadPhase):
         self._work = (np.empty((n, 2)), np.empty(n), np.empty(n), np.empty(n, dtype=np.int64))
         self._sorted = tuple(np.empty(n) for _ in range(4))
         # The sparse sweep's float32 bounds, filled only in frames that use it (an empty pair of
-        # rows in the others), and the window positions it sums.
-        self._bounds32, self._no_bounds32 = np.empty((2, n), dtype=np.float32), np.empty((2, 0), dtype=np.float32)
-        self._ramp = np.arange(1, min(n, MAX_SPARSE_N) + 1, dtype=np.int32)
+        # rows in the others), and the window positions it sums; none where it can never run.
+        sparse_n = n if self.params["sweep"] != "plain" and n <= MAX_SPARSE_N else 0
+        self._bounds32 = np.empty((2, sparse_n), dtype=np.float32)
+        self._no_bounds32 = np.empty((2, 0), dtype=np.float32)
+        self._ramp = np.arange(1, sparse_n + 1, dtype=np.int32)
         # Load (or compile) the sweeps now, in the untimed build: else the first frame that uses
         # one pays for it (for the parallel one, 4 s with a cold cache, and starting the threads).
         nothing, no_order = np.empty(0), np.empty(0, dtype=np.int64)
-        self._collect(sap_sweep_sparse, no_order, nothing, nothing, nothing, nothing, self._no_bounds32, self._ramp,
-                      0, 0)
+        if sparse_n:
+            self._collect(sap_sweep_sparse, no_order, nothing, nothing, nothing, nothing, self._no_bounds32,
+                          self._ramp, 0, 0)
         if self._collect_chunks is not None:
             self._collect_chunks(sap_sweep_parallel, no_order, nothing, nothing, nothing, nothing,
                                  self._no_bounds32, self._ramp)
@@ -348,8 +351,7 @@ class IncrementalSweepAndPrune(SweepAndPrune):
     """Sweep and prune that keeps its sorted order between frames (insertion-sort repair)."""
 
     name = "own.sap_incremental"
-    defaults = {"axis": "auto", "incremental": True, "sweep": "auto", "parallel": False,
-                "parallel_from": PARALLEL_FROM_OVERLAPS}
+    defaults = {**SweepAndPrune.defaults, "incremental": True}
 
 
 class ParallelSweepAndPrune(SweepAndPrune):
@@ -357,5 +359,4 @@ class ParallelSweepAndPrune(SweepAndPrune):
     uses more than one thread: compare its figures with that in mind)."""
 
     name = "own.sap_parallel"
-    defaults = {"axis": "auto", "incremental": True, "sweep": "auto", "parallel": True,
-                "parallel_from": PARALLEL_FROM_OVERLAPS}
+    defaults = {**SweepAndPrune.defaults, "incremental": True, "parallel": True}
