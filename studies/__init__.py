@@ -1,1 +1,14 @@
-"""Runnable experiments: `python -m studies.compare`, and the shared harness they use."""
+"""The studies: each command is a module here (`python -m studies.<command>`, or `broadphase <command>`);
+the code they share is in `studies.lib`. `python -m studies` lists the commands."""
+
+# The commands in the order a new user meets them: name -> what it answers.
+COMMANDS = {
+    "compare": "every broad phase on one stepped scene, timed per stage and checked pair by pair",
+    "recommend": "which broad phase should my project use for this scene?",
+    "show": "a picture of what a broad phase does on a scene",
+    "essay": "the essay's experiments and open questions, redone",
+    "stress": "stiff and extreme scenes: which backend breaks, and how",
+    "scale": "how each backend's cost per frame grows with n, up to 2^20",
+    "bench": "our backends against the speed targets on this machine",
+    "tune": "sweep each backend's parameters on a scene; check our defaults",
+}

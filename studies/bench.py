@@ -36,8 +36,9 @@ from own.parallel import threads
 from scenes.generate import at_essay_density
 from scenes.motion import Trajectory, simulate
 
-from .cli import CliError, Parser, run_cli
-from .harness import Job, run_isolated
+from .lib.cli import CliError, Parser, run_cli
+from .lib.harness import Job, run_isolated
+from .lib.options import add_quick_option, parse_checked
 
 # ms per frame (update + pairs) that compiled code reaches on a 2-core machine of this kind.
 TARGETS_MS = {
@@ -153,18 +154,21 @@ def print_coherence(trajectories, seconds: float) -> None:
             sys.stdout.flush()
 
 
-def main(argv: list[str] | None = None) -> int:
+def parser() -> Parser:
     p = Parser(prog="python -m studies.bench", description=__doc__.split("\n\n")[0])
-    p.add_argument("--quick", action="store_true", help="only n = 2048")
-    p.add_argument("--frames", type=int, default=10, help="timed frames per size (default 10)")
+    add_quick_option(p, "only n = 2048")
+    p.add_argument("--frames", type=int, default=10,
+                   help="timed frames per run, after one untimed warm-up frame (default 10; a third at 2^20)")
     p.add_argument("--seconds", type=float, default=SECONDS,
                    help=f"time each measurement for at least this long, in passes over the frames; the fastest "
                         f"pass counts (default {SECONDS})")
     p.add_argument("--coherence", action="store_true",
                    help="time each sorted structure from scratch against repaired from last frame's order")
-    args = p.parse_args(argv)
-    if args.frames < 1:
-        raise CliError("--frames must be at least 1")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_checked(parser(), argv)
     if not 0 <= args.seconds < float("inf"):
         raise CliError("--seconds must be a finite number >= 0")
     sizes = [2048] if args.quick else list(TARGETS_MS)

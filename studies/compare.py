@@ -7,50 +7,50 @@ frame and writes results.csv (one row per backend, repeat and frame), meta.json 
 
 from __future__ import annotations
 
-import csv
-import os
 import sys
 import time
+from pathlib import Path
 
-import pandas as pd
 from tqdm import tqdm
 
 import engines
-from scenes.motion import simulate
 
-from .cli import (Parser, add_scene_options, check_trial_options, command_line, matched_backends, prepare_out,
-                  run_cli, run_metadata, scene_from_args, warn_unavailable, write_json)
-from .harness import COLUMNS, Job, run_isolated, scene_columns
-from .summary import add_speedup, format_table, ours_against_engines, plot_error_vs_time, summarise
+from .lib.cli import Parser, command_line, matched_backends, run_cli, warn_unavailable
+from .lib.figures import error_against_time
+from .lib.harness import Job, scene_columns
+from .lib.options import (add_backends_option, add_output_options, add_quick_option, add_scene_options,
+                          add_trial_options, parse_checked, scene_from_args)
+from .lib.output import Output, read_meta
+from .lib.results import RowWriter, missed_total, ok_lines, read_rows, summarise
+from .lib.runner import Runner
+from .lib.tables import add_speedup, format_table, ours_against_engines
+
+
+def parser() -> Parser:
+    p = Parser(prog="python -m studies.compare", description=__doc__.split("\n\n")[0])
+    add_scene_options(p)
+    add_backends_option(p)
+    add_trial_options(p, frames=30, repeat=3, budget=0.25, timeout=300.0)
+    add_output_options(p, "compare")
+    add_quick_option(p, "3 frames, 1 repeat", frames=3, repeat=1)
+    p.add_argument("--check", action="store_true", help="exit status 1 if any backend missed a pair")
+    p.add_argument("--list", action="store_true", help="list the backends, their availability and exit")
+    return p
 
 
 def parse(argv: list[str] | None):
-    p = Parser(prog="python -m studies.compare", description=__doc__.split("\n\n")[0])
-    add_scene_options(p)
-    p.add_argument("--frames", type=int, default=30, help="timed frames per repeat (default 30)")
-    p.add_argument("--repeat", type=int, default=3, help="independent repeats per backend (default 3)")
-    p.add_argument("--backends", default="*", metavar="PATTERN[,PATTERN]", help="globs, e.g. 'own.*,chipmunk.*'")
-    p.add_argument("--budget", type=float, default=0.25, metavar="S",
-                   help="skip a backend whose first timed frame takes longer than S seconds (default 0.25)")
-    p.add_argument("--timeout", type=float, default=300.0, metavar="S", help="per backend, all repeats (default 300)")
-    p.add_argument("--out", metavar="DIR", help="output folder (default results/compare-<date>-<time>)")
-    p.add_argument("--check", action="store_true", help="exit status 1 if any backend missed a pair")
-    p.add_argument("--list", action="store_true", help="list the backends, their availability and exit")
-    p.add_argument("--quick", action="store_true", help="a smoke run: 3 frames, 1 repeat")
-    args = p.parse_args(argv)
-    check_trial_options(args)
-    return args
+    return parse_checked(parser(), argv)
 
 
 def list_backends() -> int:
     missing = engines.unavailable()
     for name in engines.names():
         if name in missing:
-            print(f"{name:17} UNAVAILABLE  {missing[name]}")
+            print(f"{name:20} UNAVAILABLE  {missing[name]}")
         else:
             cls = engines.backend_class(name)
             doc = (cls.__doc__ or "").strip().split("\n")[0]
-            print(f"{name:17} available    reports {cls.reports:<8} {doc}")
+            print(f"{name:20} available    reports {cls.reports:<8} {doc}")
     return 0
 
 
@@ -58,40 +58,40 @@ def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     if args.list:
         return list_backends()
+    if args.report_only:
+        return report(Path(args.out), args.check)
     chosen = matched_backends(args.backends)
     scene = scene_from_args(args)
-    out = prepare_out(args.out, "compare")
-    unavailable = warn_unavailable(chosen)
-    runnable = [n for n in chosen if n not in unavailable]
-
-    start = time.perf_counter()
-    traj = simulate(scene, args.frames + 1)  # frame 0 is every backend's warm-up
-    print(f"scene {scene.name}: n={scene.n}, radii {scene.radius_range[0]:g}..{scene.radius_range[1]:g}, "
-          f"box {scene.box}, {args.frames} timed frames x {args.repeat} repeats "
-          f"(trajectory and exact pairs computed once in {time.perf_counter() - start:.1f} s)")
-
-    fixed = scene_columns(traj)
-    csv_path = out / "results.csv"
-    partial = out / "results.partial.csv"  # renamed to results.csv once every backend has run
-    with open(partial, "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=COLUMNS)
-        writer.writeheader()
-
-        def write(rows):
-            for row in rows:
-                writer.writerow({"backend": current, **fixed, **row})
-            fh.flush()  # an interrupted run keeps every finished repeat
-
+    with Output(args.out, "compare", command_line("compare", argv), args.resume) as out:
+        unavailable = warn_unavailable(chosen)
+        runnable = [n for n in chosen if n not in unavailable]
+        writer = RowWriter(out.path, args.resume)
+        runner = Runner(writer, out)
+        start = time.perf_counter()
+        traj = runner.trajectory(scene, args.frames + 1)  # frame 0 is every backend's warm-up
+        print(f"scene {scene.name}: n={scene.n}, radii {scene.radius_range[0]:g}..{scene.radius_range[1]:g}, "
+              f"box {scene.box}, {args.frames} timed frames x {args.repeat} repeats "
+              f"(trajectory and exact pairs computed once in {time.perf_counter() - start:.1f} s)")
+        out.meta(scene={**scene_columns(traj), "box": scene.box, "frames": args.frames, "repeats": args.repeat},
+                 unavailable=unavailable)
         outcomes = {}
         with tqdm(runnable, desc="backends", unit="backend", file=sys.stderr) as bar:
-            for current in bar:
-                bar.set_postfix_str(current)
-                job = Job(current, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout)
-                outcomes[current] = run_isolated(job, traj, write).status
-    os.replace(partial, csv_path)
+            for backend in bar:
+                bar.set_postfix_str(backend)
+                job = Job(backend, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout,
+                          memory_mb=args.memory, scene=scene, frames=args.frames)
+                outcomes[backend] = runner.run(job).status
+        writer.finish()
+        out.meta(outcomes=outcomes)
+    return report(out.path, args.check)
 
-    rows = pd.read_csv(csv_path)
-    table = summarise(rows)
+
+def report(folder: Path, check: bool) -> int:
+    """The table, the headline and compare.png, from the rows in `folder`."""
+    rows, complete = read_rows(folder)
+    meta = read_meta(folder)
+    summary = summarise(rows, ["backend"])
+    table = ok_lines(summary).sort_values("total_ms")
     baseline = add_speedup(table) if not table.empty else None
     print()
     print(format_table(table, baseline) if not table.empty else "no backend produced results")
@@ -102,24 +102,21 @@ def main(argv: list[str] | None = None) -> int:
           "overlapping pair (1 = no extra work);\nmissed: truly overlapping pairs (and, for 'boxes' backends, "
           "overlapping boxes) absent from the candidates, summed over frames;\nsetup: first build and "
           "warm-up frame (JIT compilation, engine world creation) of the slowest repeat, not in the timed frames.")
-    problems = {n: s for n, s in outcomes.items() if s != "ok"}
-    for name, status in problems.items():
+    for name, status in summary.loc[summary.status != "ok", "status"].items():
         print(f"  {name}: {status}")
+    unavailable = meta.get("unavailable", {})
     if unavailable:
         print(f"NOT RUN (unavailable here): {', '.join(unavailable)}")
-
-    title = f"{scene.name}: n={scene.n}, {args.frames} frames x {args.repeat} repeats"
+    if not complete:
+        print(f"INTERRUPTED RUN: these are the rows of {folder}/results.partial.csv; continue it with --resume")
+    scene = meta.get("scene", {})
+    title = f"{scene.get('scene', '?')}: n={scene.get('n', '?')}, {scene.get('frames', '?')} frames x " \
+            f"{scene.get('repeats', '?')} repeats"
+    written = [str(folder / ("results.csv" if complete else "results.partial.csv")), str(folder / "meta.json")]
     if not table.empty:
-        plot_error_vs_time(table, out / "compare.png", title)
-    write_json(out / "meta.json", run_metadata(command_line("compare", argv), {
-        "scene": {**fixed, "box": scene.box, "speed": scene.meta.get("speed"), "frames": args.frames,
-                  "repeats": args.repeat},
-        "outcomes": outcomes, "unavailable": unavailable,
-    }))
-    print(f"\nwrote {csv_path}, {out / 'meta.json'}" + (f", {out / 'compare.png'}" if not table.empty else ""))
-
-    missed = not table.empty and ((table["missed"] > 0) | (table["box_missed"].fillna(0) > 0)).any()
-    if args.check and missed:
+        written.append(str(error_against_time(table, folder / "compare.png", title)))
+    print("\nwrote " + ", ".join(written))
+    if check and not table.empty and (missed_total(table) > 0).any():
         print("check FAILED: some backend missed pairs", file=sys.stderr)
         return 1
     return 0

@@ -8,82 +8,55 @@ just that). `--quick` is a reduced version for tests and CI.
 
 from __future__ import annotations
 
-import csv
-import json
 import sys
-import time
 from pathlib import Path
 
-import pandas as pd
+import numpy as np
 from tqdm import tqdm
 
 import engines
-from scenes import generate
-from scenes.motion import simulate
+from scenes import Scene, generate
 
-from .cli import CliError, Parser, command_line, prepare_out, run_cli, run_metadata, warn_unavailable, write_json
-from .essay_plan import Plan, Run, fixed_runs, grid_search_run
-from .harness import COLUMNS, Job, run_isolated, scene_columns
+from .lib.cli import CliError, Parser, command_line, run_cli, warn_unavailable
+from .lib.essay_plan import Plan, Run, fixed_runs, grid_search_run
+from .lib.harness import Job
+from .lib.options import add_output_options, add_quick_option, add_trial_options, parse_checked
+from .lib.output import Output, docs_folder, read_meta
+from .lib.results import RowWriter
+from .lib.runner import Runner
 
-RUN_COLUMNS = ["experiment", "run_key", "label", "speed"]
-DOCS = Path(__file__).resolve().parents[1] / "docs"
+
+DEFAULT_OUT = "results/essay"
 
 
-class Runner:
-    """Measures runs in turn, appending rows to results.csv; remembers what is already there."""
+class EssayRunner:
+    """The essay's runs as jobs: each run's scene generated once, its median frame time returned."""
 
-    def __init__(self, out: Path, plan: Plan, resume: bool, budget_s: float) -> None:
-        self.plan, self.budget_s = plan, budget_s
-        self.path = out / "results.csv"
-        self.medians: dict[str, float] = {}
+    def __init__(self, runner: Runner, plan: Plan, args) -> None:
+        self.runner, self.plan, self.args = runner, plan, args
         self.outcomes: dict[str, str] = {}
-        if resume and self.path.exists():
-            done = pd.read_csv(self.path)
-            for key, rows in done.groupby("run_key"):
-                ok = rows[rows.status == "ok"]
-                self.medians[key] = float(ok.t_total_s.median()) if len(ok) else float("inf")
-                self.outcomes[key] = rows.status.iloc[-1] if ok.empty else "ok"
-        elif self.path.exists():
-            self.path.unlink()
-        new = not self.path.exists()
-        self._file = open(self.path, "a", newline="")
-        self._writer = csv.DictWriter(self._file, fieldnames=RUN_COLUMNS + COLUMNS)
-        if new:
-            self._writer.writeheader()
-        self._scene: tuple | None = None
-        self._traj = None
         self.available = set(engines.available())
+        self._scenes: dict[tuple, Scene] = {}
 
-    def trajectory(self, run: Run):
-        if run.scene_key != self._scene:
-            scene = generate(run.dist, run.n, radius=run.radius, radii=run.radii, speed=run.speed, seed=run.seed)
-            self._traj, self._scene = simulate(scene, self.plan.frames + 1), run.scene_key
-        return self._traj
+    def scene(self, run: Run) -> Scene:
+        if run.scene_key not in self._scenes:
+            self._scenes = {run.scene_key: generate(run.dist, run.n, radius=run.radius, radii=run.radii,
+                                                    speed=run.speed, seed=run.seed)}
+        return self._scenes[run.scene_key]
 
     def median(self, run: Run) -> float:
         """Median time per frame of `run` (seconds; inf if it did not finish), measuring it if new."""
-        if run.key in self.medians:
-            return self.medians[run.key]
         if run.backend not in self.available:
             self.outcomes[run.key] = "unavailable"
             return float("inf")
-        traj = self.trajectory(run)
-        fixed = {**scene_columns(traj), "backend": run.backend, "experiment": run.experiment,
-                 "run_key": run.key, "label": run.label, "speed": run.speed}
-        job = Job(run.backend, dict(run.params), repeats=self.plan.repeats, budget_s=self.budget_s)
-        outcome = run_isolated(job, traj, lambda rows: self._write(fixed, rows))
-        ok = [r["t_total_s"] for r in outcome.rows if r["status"] == "ok"]
-        self.medians[run.key] = float(pd.Series(ok).median()) if ok else float("inf")
+        job = Job(run.backend, dict(run.params), repeats=self.args.repeat or self.plan.repeats,
+                  budget_s=self.args.budget, timeout_s=self.args.timeout, memory_mb=self.args.memory,
+                  scene=self.scene(run), frames=self.args.frames or self.plan.frames,
+                  tag={"experiment": run.experiment, "label": run.label})
+        outcome = self.runner.run(job)
         self.outcomes[run.key] = outcome.status
-        return self.medians[run.key]
-
-    def _write(self, fixed: dict, rows: list[dict]) -> None:
-        for row in rows:
-            self._writer.writerow({**row, **fixed})
-        self._file.flush()
-
-    def close(self) -> None:
-        self._file.close()
+        ok = [r["t_total_s"] for r in outcome.rows if r["status"] == "ok"]
+        return float(np.median(ok)) if ok else float("inf")
 
 
 def search_best_p(runner: Runner, n: int, backend: str, bar) -> int:
@@ -111,7 +84,7 @@ def search_best_p(runner: Runner, n: int, backend: str, bar) -> int:
             return p
 
 
-def measure(runner: Runner, plan: Plan) -> dict:
+def measure(runner: EssayRunner, plan: Plan) -> dict:
     runs = fixed_runs(plan)
     with tqdm(total=len(runs), desc="essay study", unit="run", file=sys.stderr) as bar:
         best_p = {(n, b): search_best_p(runner, n, b, bar) for n in plan.sizes for b in ("essay.grid", "own.grid")}
@@ -127,48 +100,40 @@ def measure(runner: Runner, plan: Plan) -> dict:
     return {f"{n}:{b}": p for (n, b), p in best_p.items()}
 
 
-def parse(argv):
+def parser() -> Parser:
     p = Parser(prog="python -m studies.essay", description=__doc__.split("\n\n")[0])
-    p.add_argument("--quick", action="store_true", help="a reduced study in under two minutes")
-    p.add_argument("--resume", action="store_true", help="keep the runs already in OUT/results.csv")
-    p.add_argument("--report-only", action="store_true", help="only regenerate figures and report from OUT")
-    p.add_argument("--out", metavar="DIR", help="results folder (default results/essay, or results/essay-quick)")
-    p.add_argument("--report-dir", metavar="DIR",
-                   help="where the report and figures go (default docs/ for the full study, OUT for --quick)")
-    p.add_argument("--budget", type=float, default=10.0, metavar="S",
-                   help="skip a run whose first timed frame takes longer than S seconds (default 10)")
-    return p.parse_args(argv)
+    add_quick_option(p, "a reduced study in under two minutes, into results/essay-quick unless --out is given",
+                     out="results/essay-quick")
+    add_trial_options(p, frames=None, repeat=None, budget=10.0, timeout=600.0)
+    add_output_options(p, "essay", report_dir="docs/ for the full study, OUT for --quick")
+    p.set_defaults(out=DEFAULT_OUT)  # one folder: the full study takes hours, and --resume continues it
+    return p
+
+
+def parse(argv: list[str] | None):
+    return parse_checked(parser(), argv)
 
 
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     plan = Plan.make(args.quick)
-    out = prepare_out(args.out or ("results/essay-quick" if args.quick else "results/essay"), "essay")
-    report_dir = Path(args.report_dir) if args.report_dir else (out if args.quick else DOCS)
-    meta_path = out / "meta.json"
+    out = Path(args.out)
+    report_dir = Path(args.report_dir) if args.report_dir else (out if args.quick else docs_folder())
     if args.report_only:
-        if not (out / "results.csv").exists() or not meta_path.exists():
+        if not read_meta(out):
             raise CliError(f"no finished study in {out} (run python -m studies.essay first)")
     else:
-        missing = warn_unavailable(plan.engines)
-        start = time.perf_counter()
-        runner = Runner(out, plan, args.resume, args.budget)
-        try:
+        with Output(args.out, "essay", command_line("essay", argv), args.resume) as output:
+            missing = warn_unavailable(plan.engines)
+            writer = RowWriter(output.path, args.resume)
+            output.meta(plan=vars(plan), unavailable=missing)
+            runner = EssayRunner(Runner(writer, output), plan, args)
             best_p = measure(runner, plan)
-        finally:
-            runner.close()
-        minutes = (time.perf_counter() - start) / 60
-        if args.resume and meta_path.exists():  # the runs kept from before took their time too
-            minutes += json.loads(meta_path.read_text()).get("minutes", 0.0)
-        write_json(meta_path, run_metadata(command_line("essay", argv), {
-            "plan": {k: v for k, v in vars(plan).items()}, "best_p": best_p,
-            "minutes": round(minutes, 1),
-            "outcomes": {k: v for k, v in runner.outcomes.items() if v != "ok"},
-            "unavailable": missing,
-        }))
-    from .essay_report import write_report
+            writer.finish()
+            output.meta(best_p=best_p, outcomes={k: v for k, v in runner.outcomes.items() if v != "ok"})
+    from .lib.essay_report import write_report
 
-    report = write_report(out, report_dir, json.loads(meta_path.read_text()))
+    report = write_report(out, report_dir, read_meta(out))
     print(f"wrote {out / 'results.csv'}, {report} and its figures in {report_dir / 'figures'}")
     return 0
 

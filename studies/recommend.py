@@ -10,29 +10,25 @@ figure, the rows and meta.json to `--out`.
 
 from __future__ import annotations
 
-import csv
+import json
 import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import matplotlib
+import engines
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-
-import engines  # noqa: E402
-from scenes.motion import simulate  # noqa: E402
-
-from .cli import (CliError, Parser, add_scene_options, command_line, matched_backends,  # noqa: E402
-                  prepare_out, run_cli, run_metadata, scene_from_args,
-                  warn_unavailable, write_json)
-from .harness import COLUMNS, scene_columns  # noqa: E402
-from .knobs import KNOBS  # noqa: E402
-from .summary import FAMILY_COLOURS  # noqa: E402
-from .traits import Traits, measure_traits  # noqa: E402
-from .trials import Trial, run_trial, warm_up  # noqa: E402
-from .tuning import tune_backend  # noqa: E402
+from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli, warn_unavailable
+from .lib.figures import backend_colour, new_figure, save
+from .lib.harness import Job, Outcome, scene_columns
+from .lib.options import (add_backends_option, add_output_options, add_scene_options, add_trial_options,
+                          parse_checked, scene_from_args)
+from .lib.output import Output, read_meta, write_json
+from .lib.results import RowWriter, stored_runs
+from .lib.runner import Runner
+from .lib.traits import Traits, measure_traits
+from .lib.trials import Trial, warm_up
+from .lib.tuning import tunable, tune_backend
 
 # A backend whose first frame is this many times slower than the best so far is stopped: it
 # cannot win, and pure-Python methods would take minutes at large n.
@@ -50,10 +46,16 @@ def trial_length(n: int) -> tuple[int, int]:
 
 
 def run_order(names: list[str]) -> list[str]:
-    """Ours first (fast: they set the bar that stops hopeless ones early), then the engines, the
-    pure-Python methods, and brute force (quadratic) last."""
-    rank = {"own": 0, "essay": 2}
-    return sorted(names, key=lambda b: 3 if b == "own.brute" else rank.get(b.split(".")[0], 1))
+    """Ours first (fast: they set the bar that stops hopeless ones early), then the engines and
+    libraries, the pure-Python methods, and our brute force (quadratic) last."""
+    rank = {"own": 0, "engine": 1, "library": 1, "essay": 2}
+
+    def place(name: str) -> int:
+        if engines.of_kind(name, "own") and engines.backend_class(name).method == "brute":
+            return 3
+        return rank[engines.family(name).kind]
+
+    return sorted(names, key=place)
 
 
 @dataclass
@@ -62,6 +64,7 @@ class Entry:
     trial: Trial
     tuned: bool = False  # the trial is at tuned parameters, not the defaults
     note: str = ""
+    job: str = ""  # the key of the job behind the trial, in the results
 
     @property
     def eligible(self) -> bool:
@@ -113,15 +116,15 @@ def verdict(groups: list[list[Entry]], entries: list[Entry], traits: Traits) -> 
 
 def why(win: Entry, runner: Entry | None, traits: Traits) -> str:
     """The scene traits that favour the winner's kind of structure, as measured here."""
-    family = win.backend.split(".")[1] if win.backend.startswith("own.") else win.backend
+    method = engines.backend_class(win.backend).method if win.backend in engines.available() else ""
     reasons = []
-    if "grid" in family or "hash" in family:
+    if method in ("grid", "hash"):
         reasons.append("radii are similar enough for one cell size" if traits.radius_spread < 10
                        else "big objects go to their own bucket, so the cells stay small")
-    if "sap" in family:
+    if method == "sweep":
         reasons.append("objects move little per frame, so the sorted order is nearly kept"
                        if traits.step_in_radii < 0.5 else "a sort along the spread axis separates them well")
-    if "tree" in family or "bvh" in family:
+    if method in ("tree", "kdtree"):
         reasons.append("a tree adapts to the mixed sizes and clumps" if traits.radius_spread >= 10 or traits.dispersion >= 3
                        else "a tree needs no size parameter")
     if win.tuned:
@@ -137,9 +140,10 @@ def plot(entries: list[Entry], groups: list[list[Entry]], path: Path, title: str
     if not shown:
         return
     top = {id(e) for e in (groups[0] if groups else [])}
-    fig, ax = plt.subplots(figsize=(7, 0.35 * len(shown) + 1.5))
+    fig = new_figure(figsize=(7, 0.35 * len(shown) + 1.5))
+    ax = fig.subplots()
     for y, e in enumerate(shown):
-        colour = "tab:red" if e.trial.missed else FAMILY_COLOURS.get(e.backend.split(".")[0], "tab:gray")
+        colour = "tab:red" if e.trial.missed else backend_colour(e.backend)
         t = e.trial
         ax.barh(y, t.median_ms, color=colour, alpha=0.9 if id(e) in top else 0.5)
         ax.errorbar(t.median_ms, y, xerr=[[t.median_ms - t.low_ms], [t.high_ms - t.median_ms]], color="k", capsize=2)
@@ -150,9 +154,7 @@ def plot(entries: list[Entry], groups: list[list[Entry]], path: Path, title: str
     ax.invert_yaxis()
     ax.set_xlabel("ms per frame, end to end (bar: median; whisker: fastest to slowest repeat)")
     ax.set_title(title, fontsize=9)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save(fig, path)
 
 
 def markdown(lines: list[str], entries: list[Entry], groups: list[list[Entry]], notes: list[str]) -> str:
@@ -169,65 +171,75 @@ def markdown(lines: list[str], entries: list[Entry], groups: list[list[Entry]], 
     return "\n".join(out + ["", *notes]) + "\n"
 
 
-def parse(argv):
+def parser() -> Parser:
     p = Parser(prog="python -m studies.recommend", description=__doc__.split("\n\n")[0])
     add_scene_options(p)
-    p.add_argument("--backends", default="*", metavar="PATTERN[,PATTERN]", help="globs (default: every backend)")
-    p.add_argument("--frames", type=int, help="timed frames per trial (default: 20, fewer at large n)")
-    p.add_argument("--repeat", type=int, help="repeats per trial (default 3, 2 above n = 30000)")
+    add_backends_option(p)
+    add_trial_options(p, frames=None, repeat=None, timeout=None)
     p.add_argument("--time-limit", type=float, default=60.0, metavar="S",
-                   help="aim to finish within S seconds; backends left when time runs out are not tried (default 60)")
+                   help="aim to finish the whole recommendation within S seconds; backends left when time runs out "
+                        "are not tried (default 60)")
     p.add_argument("--no-tune", action="store_true", help="use every backend's default parameters")
-    p.add_argument("--out", metavar="DIR", help="output folder (default results/recommend-<date>-<time>)")
-    args = p.parse_args(argv)
-    if (args.frames is not None and args.frames < 1) or (args.repeat is not None and args.repeat < 1):
-        raise CliError("--frames and --repeat must be at least 1")
+    add_output_options(p, "recommend")
+    return p
+
+
+def parse(argv: list[str] | None):
+    args = parse_checked(parser(), argv)
     if not args.time_limit > 0:
         raise CliError("--time-limit must be positive")
     return args
 
 
+class Trials:
+    """recommend's trials on one scene: jobs of the runner with the run's frames and repeats, each
+    given its share of the time left (at most --timeout) and stopped past a budget."""
+
+    def __init__(self, runner: Runner, scene, frames: int, repeats: int, deadline: float, args) -> None:
+        self.runner, self.scene, self.frames, self.repeats, self.deadline = runner, scene, frames, repeats, deadline
+        self.timeout_cap = args.timeout or 120.0
+        self.budget_cap = args.budget or float("inf")
+
+    def job(self, backend, params, step, repeats=None, frames=None, budget=float("inf"), share=1) -> Job:
+        left = self.deadline - time.perf_counter()
+        timeout = max(1.0, min(self.timeout_cap, left, 2 * left / share))
+        return Job(backend, dict(params), repeats=repeats or self.repeats, budget_s=min(budget, self.budget_cap),
+                   timeout_s=timeout, scene=self.scene, frames=frames or self.frames, tag={"experiment": step})
+
+    def run(self, job: Job) -> Trial:
+        """One trial; it may use twice its fair share of the time left."""
+        trial = Trial.of(job, self.runner.run(job))
+        if trial.status.startswith("timeout"):
+            trial.status = f"stopped: not done within its {job.timeout_s:.0f} s share of the time limit"
+        return trial
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
+    if args.report_only:
+        return report_only(Path(args.out))
     chosen = matched_backends(args.backends)
     scene = scene_from_args(args)
-    out = prepare_out(args.out, "recommend")
-    missing = warn_unavailable(chosen)
-    backends = run_order([b for b in chosen if b not in missing])
-    start = time.perf_counter()
-    deadline = start + args.time_limit - REPORT_S
-    frames, repeats = trial_length(scene.n)
-    shortened = (args.frames is None and frames < 20) or (args.repeat is None and repeats < 3)
-    frames, args.repeat = args.frames or frames, args.repeat or repeats
-    traj = simulate(scene, frames + 1)
-    traits = measure_traits(traj)
-    notes = [f"Trials: {frames} timed frames x {args.repeat} repeats per backend"
-             + (f" (shortened for n = {scene.n:,})" if shortened else "")
-             + f"; tuning sweeps {TUNE_FRAMES} frames x 1 repeat per point."]
-    print(f"scene {scene.name}: {', '.join(traits.words())}")
-    print(notes[0], flush=True)
-
-    fixed = scene_columns(traj)
-    fh = open(out / "results.csv", "w", newline="")
-    writer = csv.DictWriter(fh, fieldnames=COLUMNS)
-    writer.writeheader()
-
-    def trial(backend, params, repeats, budget, share=1):
-        """One trial, its rows written as they come; it may use twice its fair share of the time left."""
-        def write(rows):
-            for row in rows:
-                writer.writerow({"backend": backend, **fixed, **row})
-            fh.flush()
-        left = deadline - time.perf_counter()
-        timeout = max(1.0, min(120.0, left, 2 * left / share))
-        result = run_trial(traj, backend, params, repeats, budget, timeout, write)
-        if result.status.startswith("timeout"):
-            result.status = f"stopped: not done within its {timeout:.0f} s share of the time limit"
-        return result
-
-    entries: list[Entry] = []
-    skipped: list[str] = []
-    try:
+    with Output(args.out, "recommend", command_line("recommend", argv), args.resume) as out:
+        missing = warn_unavailable(chosen)
+        backends = run_order([b for b in chosen if b not in missing])
+        start = time.perf_counter()
+        deadline = start + args.time_limit - REPORT_S
+        frames, repeats = trial_length(scene.n)
+        shortened = (args.frames is None and frames < 20) or (args.repeat is None and repeats < 3)
+        frames, repeats = args.frames or frames, args.repeat or repeats
+        writer = RowWriter(out.path, args.resume)
+        runner = Runner(writer, out)
+        traj = runner.trajectory(scene, frames + 1)
+        traits = measure_traits(traj)
+        notes = [f"Trials: {frames} timed frames x {repeats} repeats per backend"
+                 + (f" (shortened for n = {scene.n:,})" if shortened else "")
+                 + f"; tuning sweeps {TUNE_FRAMES} frames x 1 repeat per point."]
+        print(f"scene {scene.name}: {', '.join(traits.words())}")
+        print(notes[0], flush=True)
+        trials = Trials(runner, scene, frames, repeats, deadline, args)
+        entries: list[Entry] = []
+        skipped: list[str] = []
         for k, backend in enumerate(backends):
             if time.perf_counter() > deadline:
                 skipped.append(backend)
@@ -235,41 +247,62 @@ def main(argv: list[str] | None = None) -> int:
             warm_up(backend)
             best = min((e.trial.median_ms for e in entries if e.eligible), default=float("inf"))
             budget = max(0.05, HOPELESS * best / 1e3)
-            entries.append(Entry(backend, trial(backend, {}, args.repeat, budget, share=len(backends) - k)))
+            job = trials.job(backend, {}, "trial", budget=budget, share=len(backends) - k)
+            entries.append(Entry(backend, trials.run(job), job=job.key))
             t = entries[-1].trial
             print(f"  {backend:20} {t.median_ms:10.3f} ms" if t.ok else f"  {backend:20} {t.status}", flush=True)
         if not args.no_tune:
-            tune(entries, args, deadline, trial, traj)
-    finally:
-        fh.close()
-    if skipped:
-        notes.append(f"Not tried, the time limit of {args.time_limit:g} s ran out: {', '.join(skipped)}.")
-    if missing:
-        notes.append(f"Not available here: {', '.join(missing)}.")
+            tune(entries, trials, deadline)
+        writer.finish()
+        if skipped:
+            notes.append(f"Not tried, the time limit of {args.time_limit:g} s ran out: {', '.join(skipped)}.")
+        if missing:
+            notes.append(f"Not available here: {', '.join(missing)}.")
+        meta = out.meta(scene=scene_columns(traj), traits=vars(traits), frames=frames, repeats=repeats,
+                        unavailable=missing, not_tried=skipped, notes=notes,
+                        entries=[{"backend": e.backend, "job": e.job, "tuned": e.tuned, "note": e.note}
+                                 for e in entries])
+    finish(out.path, entries, meta, Traits(**meta["traits"]))
+    print(f"({time.perf_counter() - start:.0f} s)")
+    return 0
+
+
+def finish(folder: Path, entries: list[Entry], meta: dict, traits: Traits) -> None:
+    """Rank, print the verdict, and write recommend.md, recommend.png and the ranking in meta.json."""
     groups = rank(entries)
     lines = verdict(groups, entries, traits)
     print()
     print("\n".join(lines))
-    for note in notes[1:]:
+    for note in meta["notes"][1:]:
         print(note)
-    plot(entries, groups, out / "recommend.png", f"{scene.name}: n={scene.n}")
-    (out / "recommend.md").write_text(markdown(lines, entries, groups, notes))
-    write_json(out / "meta.json", run_metadata(command_line("recommend", argv), {
-        "scene": fixed, "traits": vars(traits), "frames": frames, "repeats": args.repeat,
-        "unavailable": missing, "not_tried": skipped,
-        "ranking": [[{"backend": e.backend, "params": e.trial.params, "median_ms": e.trial.median_ms} for e in g]
-                    for g in groups]}))
-    print(f"\nwrote {out / 'recommend.md'}, recommend.png, results.csv, meta.json "
-          f"({time.perf_counter() - start:.0f} s)")
+    scene = meta["scene"]
+    plot(entries, groups, folder / "recommend.png", f"{scene['scene']}: n={scene['n']}")
+    (folder / "recommend.md").write_text(markdown(lines, entries, groups, meta["notes"]))
+    meta["ranking"] = [[{"backend": e.backend, "params": e.trial.params, "median_ms": e.trial.median_ms} for e in g]
+                       for g in groups]
+    write_json(folder / "meta.json", meta)
+    print(f"\nwrote {folder / 'recommend.md'}, recommend.png, results.csv, meta.json")
+
+
+def report_only(folder: Path) -> int:
+    """The verdict and files again from the rows and meta.json of an earlier run."""
+    meta, stored = read_meta(folder), stored_runs(folder)
+    if "entries" not in meta:
+        raise CliError(f"{folder} holds no finished recommendation (meta.json lists no trials)")
+    entries = []
+    for e in meta["entries"]:
+        job = Job(e["backend"], json.loads(e["job"])["params"])
+        rows = stored.get(e["job"], [])
+        outcome = Outcome(e["backend"], rows[-1]["status"] if rows else "not measured", rows)
+        entries.append(Entry(e["backend"], Trial.of(job, outcome), e["tuned"], e["note"]))
+    finish(folder, entries, meta, Traits(**meta["traits"]))
     return 0
 
 
-def tune(entries: list[Entry], args, deadline: float, trial, traj) -> None:
-    # `trial(backend, params, repeats, budget)` is main's measuring function (rows to the CSV).
+def tune(entries: list[Entry], trials: Trials, deadline: float) -> None:
     """Tune the backends with knobs that could still win, then re-measure the tuned setting."""
-    eligible = sorted((e for e in entries if e.eligible and e.backend in KNOBS), key=lambda e: e.trial.median_ms)
+    eligible = sorted((e for e in entries if e.eligible and tunable([e.backend])), key=lambda e: e.trial.median_ms)
     leader = min((e.trial.median_ms for e in entries if e.eligible), default=float("inf"))
-    short = traj.head(TUNE_FRAMES + 1)
     for e in eligible:
         if e.trial.median_ms > TUNE_WITHIN * leader:
             e.note = f"not tuned: default over {TUNE_WITHIN:g}x the leader"
@@ -277,19 +310,24 @@ def tune(entries: list[Entry], args, deadline: float, trial, traj) -> None:
         if time.perf_counter() > deadline:
             e.note = "not tuned: time limit"
             continue
-        timeout = max(1.0, deadline - time.perf_counter())
-        found = tune_backend(short, e.backend, repeats=1, budget_s=HOPELESS * leader / 1e3, timeout_s=timeout,
-                             with_default=False)
+
+        def measure(params, step, backend=e.backend):
+            return trials.run(trials.job(backend, params, f"tuning {step}", repeats=1, frames=TUNE_FRAMES,
+                                         budget=HOPELESS * leader / 1e3))
+
+        found = tune_backend(trials.scene, e.backend, measure, with_default=False)
         defaults = engines.backend_class(e.backend).defaults
-        if not found.params or all(defaults.get(k) == v for k, v in found.params.items()) or time.perf_counter() > deadline:
+        same = all(defaults.get(k) == v for k, v in found.params.items())
+        if not found.params or same or time.perf_counter() > deadline:
             e.note = "defaults were best" if found.params else "tuning found no better setting"
             continue
-        tuned = trial(e.backend, found.params, args.repeat, float("inf"))
+        job = trials.job(e.backend, found.params, "tuned")
+        tuned = trials.run(job)
         setting = ", ".join(f"{k}={v}" for k, v in found.params.items())
         # Adopted only when faster beyond the run-to-run spread: otherwise the defaults stand.
         if tuned.ok and tuned.missed == 0 and tuned.high_ms < e.trial.low_ms:
             e.note = f"tuned; defaults took {e.trial.median_ms:.3g} ms"
-            e.trial, e.tuned = tuned, True
+            e.trial, e.tuned, e.job = tuned, True, job.key
         elif tuned.ok and tuned.missed == 0 and tuned.overlaps(e.trial):
             e.note = f"tuned setting ({setting}, {tuned.median_ms:.3g} ms) within the spread of the defaults"
         else:

@@ -10,34 +10,30 @@ also writes docs/SCALE.md, with our fastest backend against the fastest engine a
 
 from __future__ import annotations
 
-import csv
-import json
 import os
 import shutil
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import pandas as pd
+from tqdm import tqdm
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-from tqdm import tqdm  # noqa: E402
+import engines
+from scenes.generate import at_essay_density
 
-from scenes.generate import at_essay_density  # noqa: E402
-from scenes.motion import simulate  # noqa: E402
-
-from .cli import (CliError, Parser, command_line, matched_backends, prepare_out,  # noqa: E402
-                  run_cli, run_metadata, warn_unavailable, write_json)
-from .harness import COLUMNS, Job, run_isolated, scene_columns  # noqa: E402
-from .summary import ENGINE_FAMILIES  # noqa: E402
+from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli, warn_unavailable
+from .lib.figures import new_figure, save
+from .lib.harness import Job
+from .lib.options import (add_backends_option, add_output_options, add_quick_option, add_trial_options,
+                          parse_checked)
+from .lib.output import Output, docs_folder, read_meta, write_json
+from .lib.results import RowWriter, ok_lines, read_rows, summarise
+from .lib.runner import Runner
 
 DISTS = ("uniform", "clusters")
-DOCS = Path(__file__).resolve().parents[1] / "docs"
 # Compiles (or loads from the cache) every kernel of our backends, and says how long that took.
 # A one-line cached kernel is loaded first: numba's own start-up (its import, and the one-time
 # set-up of its compiler on the first kernel, 1 s here, which any numba program pays) is then
@@ -53,11 +49,11 @@ def first(x):
 
 first(0)
 ready = time.perf_counter()
+import sys
 import engines
 from scenes import generate
 scene = generate("uniform", 256, seed=0)
-for name in ("own.sap", "own.sap_incremental", "own.sap_parallel", "own.grid", "own.grid_incremental", "own.quadtree",
-             "own.bvh"):
+for name in sys.argv[1:]:
     b = engines.create(name)
     b.reset(scene.positions, scene.radii)
     b.update(scene.positions)
@@ -75,8 +71,10 @@ def compile_times() -> dict[str, float | str]:
         probe.write_text(COMPILE_PROBE)
         env = {**os.environ, "NUMBA_CACHE_DIR": cache}
         times: dict[str, float | str] = {}
+        ours = [n for n in engines.names() if engines.of_kind(n, "own")]
         for kind in ("cold", "warm"):
-            done = subprocess.run([sys.executable, str(probe)], env=env, capture_output=True, text=True, timeout=600)
+            done = subprocess.run([sys.executable, str(probe), *ours], env=env, capture_output=True, text=True,
+                                  timeout=600)
             if done.returncode != 0:
                 times["error"] = (done.stderr.strip().splitlines() or [f"exit status {done.returncode}"])[-1]
                 return {"cold_s": float("nan"), "warm_s": float("nan"), **times}
@@ -95,7 +93,8 @@ def growth_exponent(d: pd.DataFrame) -> float:
 
 def figure(medians: pd.DataFrame, path: Path) -> dict[tuple[str, str], float]:
     exponents = {}
-    fig, axes = plt.subplots(1, len(DISTS), figsize=(7 * len(DISTS), 5.5), sharey=True)
+    fig = new_figure(figsize=(7 * len(DISTS), 5.5))
+    axes = fig.subplots(1, len(DISTS), sharey=True)
     for ax, dist in zip(np.atleast_1d(axes), DISTS):
         for backend, d in medians[medians.dist == dist].groupby("backend", sort=False):
             k = exponents[(dist, backend)] = growth_exponent(d)
@@ -107,9 +106,7 @@ def figure(medians: pd.DataFrame, path: Path) -> dict[tuple[str, str], float]:
         ax.set_title(dist, fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7, loc="upper left")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save(fig, path)
     return exponents
 
 
@@ -118,9 +115,10 @@ def ours_against_engines_per_n(medians: pd.DataFrame) -> pd.DataFrame:
     end per frame, and the ratio."""
     rows = []
     for (dist, n), d in medians.groupby(["dist", "n"], sort=False):
-        ours, engines = d[d.backend.str.startswith("own.")], d[d.backend.str.startswith(ENGINE_FAMILIES)]
-        if len(ours) and len(engines):
-            best, engine = ours.loc[ours.ms.idxmin()], engines.loc[engines.ms.idxmin()]
+        ours = d[d.backend.map(lambda b: engines.of_kind(b, "own"))]
+        rivals = d[d.backend.map(lambda b: engines.of_kind(b, "engine"))]
+        if len(ours) and len(rivals):
+            best, engine = ours.loc[ours.ms.idxmin()], rivals.loc[rivals.ms.idxmin()]
             rows.append({"dist": dist, "n": n, "ours": best.backend, "ours_ms": best.ms, "engine": engine.backend,
                          "engine_ms": engine.ms, "ratio": engine.ms / best.ms})
     return pd.DataFrame(rows, columns=["dist", "n", "ours", "ours_ms", "engine", "engine_ms", "ratio"])
@@ -149,7 +147,7 @@ def report(medians: pd.DataFrame, exponents: dict, stopped: dict, meta: dict, fo
              f"{meta['machine']['cores']} cores); regenerate with `python -m studies.scale`.", ""]
     if meta["unavailable"]:
         lines += [f"**Not run, their bindings are missing: {', '.join(meta['unavailable'])}.**", ""]
-    if "interrupted" in meta:
+    if meta.get("interrupted"):
         lines += [f"**From an interrupted run: its rows end at {meta['interrupted']}, and larger sizes of that "
                   "distribution were not measured.**", ""]
     lines += ["Scenes at the essay's density (r = 10, the box side scaled by sqrt(n / 2048)), stepped frame by "
@@ -163,7 +161,8 @@ def report(medians: pd.DataFrame, exponents: dict, stopped: dict, meta: dict, fo
               f"{r['why']} |" for r in backend_rows(medians, exponents, stopped)]
     versus = ours_against_engines_per_n(medians)
     lines += ["", "## Our fastest backend against the fastest engine", "",
-              "At each n where both ran (engines are " + ", ".join(f.rstrip('.') for f in ENGINE_FAMILIES) + ").", ""]
+              "At each n where both ran (engines are "
+              + ", ".join(f.name for f in engines.FAMILIES.values() if f.kind == "engine") + ").", ""]
     if versus.empty:
         lines.append("No n where one of ours and an engine both ran.")
     else:
@@ -183,69 +182,53 @@ def report(medians: pd.DataFrame, exponents: dict, stopped: dict, meta: dict, fo
     return path
 
 
-def parse(argv):
+def parser() -> Parser:
     p = Parser(prog="python -m studies.scale", description=__doc__.split("\n\n")[0])
-    p.add_argument("--backends", default="*", metavar="PATTERN[,PATTERN]", help="backends (globs; default all)")
+    add_backends_option(p)
     p.add_argument("--max-log2-n", type=int, default=20, help="largest n as a power of two (default 20)")
-    p.add_argument("--frames", type=int, default=3, help="timed frames per size (default 3)")
-    p.add_argument("--budget", type=float, default=1.0, metavar="S",
-                   help="stop a backend once a frame takes longer than S seconds (default 1)")
-    # Most jobs take seconds, even at 2^20. The limit stops the few that would take minutes: on
+    # Most jobs take seconds, even at 2^20. The timeout stops the few that would take minutes: on
     # the clustered scene at n = 262144 a job (build, frames, exact checks of dense frames) exceeds it (a
     # limit of 300 s reached that size, but let each Chipmunk backend spend all of it at n = 32768).
-    p.add_argument("--timeout", type=float, default=60.0, metavar="S", help="per backend and size (default 60)")
-    p.add_argument("--quick", action="store_true", help="a smoke run: n up to 2^11, one frame")
-    p.add_argument("--out", metavar="DIR", help="results folder (default results/scale-<date>-<time>)")
-    p.add_argument("--report-dir", metavar="DIR",
-                   help="where SCALE.md and its figure go (default docs/ for a full run, else the results folder)")
-    p.add_argument("--report-only", action="store_true",
-                   help="only redo the figure and report from --out (an interrupted run's rows too)")
-    args = p.parse_args(argv)
-    if args.quick:
-        args.max_log2_n, args.frames = min(args.max_log2_n, 11), 1
-    if not 6 <= args.max_log2_n <= 24 or args.frames < 1 or args.budget <= 0:
-        raise CliError("--max-log2-n must be 6..24, --frames and --budget positive")
+    add_trial_options(p, frames=3, repeat=1, budget=1.0, timeout=60.0)
+    add_output_options(p, "scale", report_dir="docs/ for a full run, else the results folder")
+    add_quick_option(p, "n up to 2^11, one frame", max_log2_n=11, frames=1)
+    return p
+
+
+def parse(argv: list[str] | None):
+    args = parse_checked(parser(), argv)
+    if not 6 <= args.max_log2_n <= 24:
+        raise CliError("--max-log2-n must be 6..24")
     return args
 
 
-def measure(args, chosen: list[str], missing: list[str], out: Path) -> None:
-    """Every backend at doubling n, row by row into results.partial.csv (renamed results.csv once
-    complete, so an interrupted run keeps what it measured). A run that ends without a row saying
-    why (a timeout, a crash) gets one, so the report can tell where and why a backend stopped."""
+def measure(args, chosen: list[str], runner: Runner) -> None:
+    """Every backend at doubling n; a backend that does not finish a size (over the budget, a
+    crash, a timeout) is not run at larger sizes."""
     sizes = [2**k for k in range(6, args.max_log2_n + 1)]
-    partial = out / "results.partial.csv"
-    with open(partial, "w", newline="") as fh, tqdm(total=len(DISTS) * len(sizes), desc="scale", unit="size",
-                                                     file=sys.stderr) as bar:
-        writer = csv.DictWriter(fh, fieldnames=COLUMNS)
-        writer.writeheader()
+    with tqdm(total=len(DISTS) * len(sizes), desc="scale", unit="size", file=sys.stderr) as bar:
         for dist in DISTS:
-            active = [b for b in chosen if b not in missing]
+            active = list(chosen)
             for n in sizes:
                 if not active:
                     break
-                traj = simulate(at_essay_density(dist, n), args.frames + 1)
-                fixed = scene_columns(traj)
+                scene = at_essay_density(dist, n)
                 for backend in list(active):
                     bar.set_postfix_str(f"{dist} n={n} {backend}")
-                    job = Job(backend, budget_s=args.budget, timeout_s=args.timeout)
-                    result = run_isolated(job, traj, lambda rows: [writer.writerow(
-                        {"backend": backend, **fixed, **r}) for r in rows])
-                    if result.status != "ok":
+                    job = Job(backend, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout,
+                              memory_mb=args.memory, scene=scene, frames=args.frames)
+                    if runner.run(job).status != "ok":
                         active.remove(backend)
-                        if not result.rows or result.rows[-1]["status"] != result.status:
-                            writer.writerow({"backend": backend, **fixed, "status": result.status})
-                    fh.flush()
                 bar.update(1)
-    os.replace(partial, out / "results.csv")
 
 
-def summarise(rows: pd.DataFrame) -> tuple[pd.DataFrame, dict[tuple[str, str], str]]:
+def summarise_sizes(rows: pd.DataFrame) -> tuple[pd.DataFrame, dict[tuple[str, str], str]]:
     """Median ms per frame and peak memory per (dist, backend, n) of the runs that finished, and
     where and why each backend that stopped did."""
-    ok = rows[rows.status == "ok"]
-    medians = (ok.assign(ms=ok.t_total_s * 1e3).groupby(["dist", "backend", "n"], sort=False)
-               .agg(ms=("ms", "median"), peak_mb=("peak_rss_mb", "max")).reset_index())
-    failed = rows[rows.status != "ok"].drop_duplicates(["dist", "backend"])
+    table = summarise(rows, ["dist", "backend", "n"])
+    medians = ok_lines(table).reset_index().rename(columns={"total_ms": "ms"})
+    medians = medians[["dist", "backend", "n", "ms", "peak_mb"]]
+    failed = table[table.status != "ok"].reset_index().drop_duplicates(["dist", "backend"])
     stopped = {(r.dist, r.backend): f"n = {r.n}: {r.status}" for r in failed.itertuples()}
     return medians, stopped
 
@@ -255,37 +238,34 @@ def main(argv: list[str] | None = None) -> int:
     if args.report_only:
         return report_only(args, argv)
     chosen = matched_backends(args.backends)
-    out = prepare_out(args.out, "scale")
-    missing = warn_unavailable(chosen)
-    start = time.perf_counter()
-    measure(args, chosen, missing, out)
-    medians, stopped = summarise(pd.read_csv(out / "results.csv"))
-    compile_s = compile_times()
-    meta = run_metadata(command_line("scale", argv), {
-        "compile": compile_s, "unavailable": missing, "minutes": round((time.perf_counter() - start) / 60, 1)})
+    with Output(args.out, "scale", command_line("scale", argv), args.resume) as out:
+        missing = warn_unavailable(chosen)
+        writer = RowWriter(out.path, args.resume)
+        out.meta(unavailable=missing)
+        measure(args, [b for b in chosen if b not in missing], Runner(writer, out))
+        writer.finish()
+        meta = out.meta(compile=compile_times())
     # Only a run of every backend over every size replaces the report in docs/.
     full = args.backends == "*" and args.max_log2_n == 20 and not args.quick
-    finish(medians, stopped, meta, out, Path(args.report_dir) if args.report_dir else (DOCS if full else out))
+    medians, stopped = summarise_sizes(read_rows(out.path)[0])
+    finish(medians, stopped, meta, out.path, Path(args.report_dir) if args.report_dir else
+           (docs_folder() if full else out.path))
     return 0
 
 
 def report_only(args, argv) -> int:
     """Figure and report again from --out's rows; those of an interrupted run (results.partial.csv)
     too, marked as such. Compile times come from its meta.json, or are measured now."""
-    if not args.out:
-        raise CliError("--report-only needs --out, the folder of an earlier run")
     out = Path(args.out)
-    done, partial = out / "results.csv", out / "results.partial.csv"
-    if not done.exists() and not partial.exists():
-        raise CliError(f"{out} holds no results.csv or results.partial.csv to report on")
-    rows = pd.read_csv(done if done.exists() else partial)
-    medians, stopped = summarise(rows)
-    earlier = json.loads((out / "meta.json").read_text()) if (out / "meta.json").exists() else {}
-    meta = run_metadata(command_line("scale", argv), {
-        "compile": earlier.get("compile") or compile_times(),
-        # Warned about only when the earlier run did not record them: they are not run again here.
-        "unavailable": earlier["unavailable"] if "unavailable" in earlier else warn_unavailable(matched_backends("*"))})
-    if not done.exists():
+    rows, complete = read_rows(out)
+    medians, stopped = summarise_sizes(rows)
+    meta = read_meta(out)
+    meta.update(command=command_line("scale", argv), interrupted=None)
+    meta.setdefault("compile", compile_times())
+    # Warned about only when the earlier run did not record them: they are not run again here.
+    if "unavailable" not in meta:
+        meta["unavailable"] = warn_unavailable(matched_backends("*"))
+    if not complete:
         last = rows.iloc[-1]
         meta["interrupted"] = f"{last.dist} n = {last.n}"
     finish(medians, stopped, meta, out, Path(args.report_dir) if args.report_dir else out)
@@ -309,7 +289,7 @@ def finish(medians: pd.DataFrame, stopped: dict, meta: dict, out: Path, report_d
         print(f"\nnumba compile of our kernels: {compile_s['cold_s']:.1f} s with an empty cache, "
               f"{compile_s['warm_s']:.2f} s from the cache (our imports included), after numba's own "
               f"start-up of {compile_s['numba_warm_s']:.2f} s (its import and first kernel from the cache)")
-    if "interrupted" in meta:
+    if meta.get("interrupted"):
         print(f"\nINTERRUPTED RUN: the rows end at {meta['interrupted']}; later sizes were not measured")
     meta.update(stopped={f"{d} {b}": s for (d, b), s in stopped.items()},
                 exponents={f"{d} {b}": e for (d, b), e in exponents.items()})

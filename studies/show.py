@@ -3,21 +3,22 @@
 Draws the scene's circles with the backend's structure (grid cells, quadtree nodes, SAP
 intervals along the sweep axis), every candidate pair as a thin grey segment, the truly
 overlapping pairs it found in green and any pair it should have reported but missed in red.
-`--animate` writes a GIF of the stepped scene with the structure rebuilt every frame.
+`--animate N` writes a GIF of the first N frames of the stepped scene as the backend sees them.
 """
 
 from __future__ import annotations
 
 import sys
 
-import matplotlib.pyplot as plt
 from matplotlib.animation import FuncAnimation, PillowWriter
 
 import engines
 from scenes.motion import simulate
 
-from .cli import CliError, Parser, add_scene_options, prepare_out, run_cli, scene_from_args
-from .drawing import draw_frame, new_figure
+from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli
+from .lib.drawing import draw_frame, new_figure
+from .lib.options import add_backends_option, add_scene_options, parse_checked, scene_from_args
+from .lib.output import Output
 
 
 def parse_params(text: str | None) -> dict:
@@ -39,19 +40,24 @@ def parse_params(text: str | None) -> dict:
     return params
 
 
-def parse(argv):
+def parser() -> Parser:
     p = Parser(prog="python -m studies.show", description=__doc__.split("\n\n")[0])
-    p.add_argument("--backend", required=True, help="the backend to draw (see python -m studies.compare --list)")
+    add_backends_option(p, default=None, what="the backends to draw, one picture each (see python -m studies.compare "
+                                               "--list)")
     p.add_argument("--params", metavar="NAME=VALUE[,...]", help="backend parameters, e.g. capacity=2")
     add_scene_options(p, n=256)
     p.add_argument("--frame", type=int, default=0, help="which frame of the stepped scene to draw (default 0)")
-    p.add_argument("--animate", action="store_true", help="also write an animated GIF of the stepped scene")
-    p.add_argument("--frames", type=int, default=30, help="frames in the animation (default 30)")
+    p.add_argument("--animate", type=int, nargs="?", const=30, metavar="N",
+                   help="also write an animated GIF of the first N frames (default N: 30)")
     p.add_argument("--fps", type=int, default=10, help="animation frames per second (default 10)")
     p.add_argument("--out", metavar="DIR", help="output folder (default results/show-<date>-<time>)")
-    args = p.parse_args(argv)
-    if args.frame < 0 or args.frames < 1 or args.fps < 1:
-        raise CliError("--frame must be >= 0, --frames and --fps >= 1")
+    return p
+
+
+def parse(argv: list[str] | None):
+    args = parse_checked(parser(), argv)
+    if args.frame < 0 or (args.animate is not None and args.animate < 1) or args.fps < 1:
+        raise CliError("--frame must be >= 0, --animate and --fps >= 1")
     return args
 
 
@@ -79,41 +85,48 @@ class Stepper:
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     params = parse_params(args.params)
+    names = matched_backends(args.backends)
+    backends = []
     try:
-        backend = engines.create(args.backend, **params)
+        for name in names:
+            backends.append(engines.create(name, **params))
     except ValueError as exc:
         raise CliError(str(exc)) from None
     scene = scene_from_args(args)
-    out = prepare_out(args.out, "show")
-    traj = simulate(scene, max(args.frame + 1, args.frames if args.animate else 1))
-    label = f"{backend.describe()} on {scene.name}"
-    name = args.backend.replace(".", "_")
+    traj = simulate(scene, max(args.frame + 1, args.animate or 1))
+    with Output(args.out, "show", command_line("show", argv)) as out:
+        for name, backend in zip(names, backends):
+            draw(name, backend, params, traj, args, out.path)
+    return 0
+
+
+def draw(name: str, backend, params: dict, traj, args, folder) -> None:
+    """The backend's picture at --frame, and with --animate its GIF."""
+    label = f"{backend.describe()} on {traj.scene.name}"
+    stem = name.replace(".", "_")
     try:
         stepper = Stepper(backend, traj)
-        has_strip = "intervals" in backend.structure()
-        fig = new_figure(has_strip)
+        fig = new_figure("intervals" in backend.structure())
         for f in range(1, args.frame + 1):  # bring a coherent backend to the frame the right way
             backend.update(traj.positions[f])
         counts = stepper.draw(fig, args.frame, label)
-        png = out / f"{name}.png"
+        png = folder / f"{stem}.png"
         fig.savefig(png, dpi=100)
         print(f"wrote {png}: " + ", ".join(f"{v} {k}" for k, v in counts.items()))
         if args.animate:
-            fresh = engines.create(args.backend, **params)  # from frame 0 again, as a user steps it
+            fresh = engines.create(name, **params)  # from frame 0 again, as a user steps it
             try:
                 stepper = Stepper(fresh, traj)
-                anim = FuncAnimation(fig, lambda f: stepper.draw(fig, f, label), frames=args.frames, repeat=False)
-                gif = out / f"{name}.gif"
+                anim = FuncAnimation(fig, lambda f: stepper.draw(fig, f, label), frames=args.animate, repeat=False)
+                gif = folder / f"{stem}.gif"
                 anim.save(gif, writer=PillowWriter(fps=args.fps), dpi=70)
             finally:
                 fresh.close()
-            print(f"wrote {gif}: {args.frames} frames")
-        plt.close(fig)
+            print(f"wrote {gif}: {args.animate} frames")
         if counts["missed"]:
-            print(f"{args.backend} MISSED {counts['missed']} pair(s) on the drawn frame (red)", file=sys.stderr)
+            print(f"{name} MISSED {counts['missed']} pair(s) on the drawn frame (red)", file=sys.stderr)
     finally:
         backend.close()
-    return 0
 
 
 if __name__ == "__main__":

@@ -11,35 +11,30 @@ families and writes the report that justifies them (docs/TUNING.md).
 from __future__ import annotations
 
 import argparse
-import csv
+import json
 import sys
 from pathlib import Path
 from typing import Any
 
-import matplotlib
 import matplotlib.ticker
+import numpy as np
+import pandas as pd
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
+import engines
+from own.grid import GRID_CELL_FACTORS, MAX_CELLS_PER_OBJECT
+from own.sap import SPARSE_PAIRS_PER_OBJECT
+from scenes import Scene, generate
 
-from own.grid import MAX_CELLS_PER_OBJECT  # noqa: E402
-from own.sap import SPARSE_PAIRS_PER_OBJECT  # noqa: E402
-from scenes import generate  # noqa: E402
-from scenes.motion import simulate  # noqa: E402
+from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli, warn_unavailable
+from .lib.figures import new_figure, save
+from .lib.options import (add_backends_option, add_output_options, add_quick_option, add_scene_options,
+                          add_trial_options, parse_checked, scene_from_args)
+from .lib.output import Output, docs_folder
+from .lib.results import RowWriter, read_rows, stored_runs, summarise
+from .lib.runner import Runner
+from .lib.trials import run_trial, warm_up
+from .lib.tuning import Tuned, tunable, tune_backend
 
-from .cli import (CliError, Parser, add_scene_options, check_trial_options, command_line, matched_backends,  # noqa: E402
-                  prepare_out, run_cli, run_metadata, scene_from_args,
-                  warn_unavailable, write_json)
-from .harness import scene_columns  # noqa: E402
-from .knobs import GRID_CELL_FACTORS, KNOBS, tunable  # noqa: E402
-from .trials import Trial, warm_up  # noqa: E402
-from .tuning import Tuned, tune_backend  # noqa: E402
-
-DOCS = Path(__file__).resolve().parents[1] / "docs"
-COLUMNS = ["backend", "param", "value", "params", "status", "median_ms", "low_ms", "high_ms", "missed",
-           "scene", "dist", "n", "radius_min", "radius_max", "seed"]
 # The scene families the default rules are checked on (each at every n of FAMILY_SIZES).
 FAMILIES: dict[str, dict[str, Any]] = {
     "uniform r=10": {"dist": "uniform", "radius": 10.0},
@@ -51,25 +46,6 @@ FAMILIES: dict[str, dict[str, Any]] = {
 }
 FAMILY_SIZES = (1024, 8192)
 OWN = ["own.grid", "own.quadtree", "own.sap"]
-
-
-class Recorder:
-    """Appends one CSV row per measured point and flushes it, so an interrupted run keeps them."""
-
-    def __init__(self, path: Path) -> None:
-        self._fh = open(path, "w", newline="")
-        self._writer = csv.DictWriter(self._fh, fieldnames=COLUMNS)
-        self._writer.writeheader()
-        self.scene: dict[str, Any] = {}
-
-    def __call__(self, backend: str, param: str, value: Any, trial: Trial) -> None:
-        self._writer.writerow({"backend": backend, "param": param, "value": value, "params": trial.described,
-                               "status": trial.status, "median_ms": trial.median_ms, "low_ms": trial.low_ms,
-                               "high_ms": trial.high_ms, "missed": trial.missed, **self.scene})
-        self._fh.flush()
-
-    def close(self) -> None:
-        self._fh.close()
 
 
 def describe_result(t: Tuned) -> str:
@@ -93,7 +69,8 @@ def plot_sweeps(results: list[Tuned], path: Path, title: str) -> None:
         return
     cols = min(3, len(panels))
     rows = -(-len(panels) // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(4.6 * cols, 3.4 * rows), squeeze=False)
+    fig = new_figure(figsize=(4.6 * cols, 3.4 * rows))
+    axes = fig.subplots(rows, cols, squeeze=False)
     for ax, (t, sweep) in zip(axes.flat, panels):
         pts = [(v, tr) for v, tr in sweep.points if tr.ok]
         labels = [str(v) for v, _ in pts]
@@ -120,9 +97,7 @@ def plot_sweeps(results: list[Tuned], path: Path, title: str) -> None:
     for ax in list(axes.flat)[len(panels):]:
         ax.axis("off")
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save(fig, path)
 
 
 def plot_optimum_against_n(table: pd.DataFrame, path: Path) -> None:
@@ -130,7 +105,8 @@ def plot_optimum_against_n(table: pd.DataFrame, path: Path) -> None:
     numeric = table[pd.to_numeric(table["best_value"], errors="coerce").notna()]
     if numeric.empty:
         return
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig = new_figure(figsize=(6, 4))
+    ax = fig.subplots()
     for (backend, param), d in numeric.groupby(["backend", "param"]):
         ax.plot(d["n"], d["best_value"].astype(float), "o-", label=f"{backend} {param}")
     ax.set_xscale("log", base=2)
@@ -139,17 +115,22 @@ def plot_optimum_against_n(table: pd.DataFrame, path: Path) -> None:
     ax.set_ylabel("best value")
     ax.legend(fontsize=7)
     ax.set_title("optimum against n")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save(fig, path)
 
 
-def run_tune(traj, backends: list[str], args, record: Recorder) -> list[Tuned]:
-    record.scene = scene_columns(traj)
+def run_tune(runner: Runner, scene: Scene, backends: list[str], args) -> list[Tuned]:
+    """Tune each backend on the scene; every point is a job of the runner, its rows tagged with
+    the knob swept ("best" and "default" for the re-measured optimum and the defaults)."""
     results = []
     for backend in backends:
         warm_up(backend)
-        tuned = tune_backend(traj, backend, args.repeat, args.budget, args.timeout, record)
+
+        def measure(params, step, backend=backend):
+            return run_trial(runner, scene, backend, params, frames=args.frames, repeats=args.repeat,
+                             budget_s=args.budget, timeout_s=args.timeout,
+                             tag={"experiment": step, "label": ", ".join(f"{k}={v}" for k, v in params.items())})
+
+        tuned = tune_backend(scene, backend, measure)
         print("  " + describe_result(tuned), flush=True)
         results.append(tuned)
     return results
@@ -168,14 +149,14 @@ def best_rows(results: list[Tuned], n: int) -> list[dict[str, Any]]:
     return rows
 
 
-def families_report(out: Path, report_dir: Path, args, record: Recorder) -> None:
+def families_report(runner: Runner, out: Path, report_dir: Path, args) -> None:
     """Our defaults against the tuned optimum on every scene family; writes TUNING.md + figures."""
     rows, curves = [], []
     for family, kwargs in FAMILIES.items():
         for n in FAMILY_SIZES:
-            traj = simulate(generate(n=n, seed=args.seed, speed=args.speed, **kwargs), args.frames + 1)
+            scene = generate(n=n, seed=args.seed, speed=args.speed, **kwargs)
             print(f"{family}, n={n}:", flush=True)
-            for t in run_tune(traj, OWN, args, record):
+            for t in run_tune(runner, scene, OWN, args):
                 rows.append({"family": family, "n": n, "backend": t.backend,
                              "best": ", ".join(f"{k}={v}" for k, v in t.params.items()),
                              "best_ms": t.best.median_ms if t.best else float("nan"),
@@ -198,7 +179,8 @@ def families_report(out: Path, report_dir: Path, args, record: Recorder) -> None
     panels = [("own.grid", "cell", [f"{f:g}" for f in GRID_CELL_FACTORS],
                "requested cell / default cell (1 = the default rule)"),
               ("own.quadtree", "capacity", None, "capacity"), ("own.quadtree", "max_depth", None, "maximum depth")]
-    fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels), 3.8))
+    fig = new_figure(figsize=(5 * len(panels), 3.8))
+    axes = fig.subplots(1, len(panels))
     for ax, (backend, param, ticks, xlabel) in zip(axes, panels):
         d = curves[(curves.backend == backend) & (curves.param == param)]
         for (family, n), g in d.groupby(["family", "n"], sort=False):
@@ -213,9 +195,7 @@ def families_report(out: Path, report_dir: Path, args, record: Recorder) -> None
         ax.set_ylabel("time / best time on that scene", fontsize=8)
         ax.set_title(f"{backend}: {param}", fontsize=9)
     axes[0].legend(fontsize=6)
-    fig.tight_layout()
-    fig.savefig(figures / "tuning_rules.png", dpi=110)
-    plt.close(fig)
+    save(fig, figures / "tuning_rules.png")
     write_tuning_md(table, curves, report_dir / "TUNING.md", args)
 
 
@@ -278,23 +258,21 @@ def write_tuning_md(table: pd.DataFrame, curves: pd.DataFrame, path: Path, args)
     path.write_text("\n".join(lines) + "\n")
 
 
-def parse(argv):
+def parser() -> Parser:
     p = Parser(prog="python -m studies.tune", description=__doc__.split("\n\n")[0])
     add_scene_options(p)
-    p.add_argument("--backends", default=",".join(KNOBS), metavar="PATTERN[,PATTERN]",
-                   help="backends to tune (globs; only those with knobs are swept; default: all with knobs)")
+    add_backends_option(p, what="backends to tune (only those with knobs are swept; default: all with knobs)")
     p.add_argument("--sizes", metavar="N[,N...]", help="tune at each of these n (the optimum against n)")
     p.add_argument("--families", action="store_true",
                    help="check our own backends' default rules over the scene families and write TUNING.md")
-    p.add_argument("--frames", type=int, default=10, help="timed frames per point (default 10)")
-    p.add_argument("--repeat", type=int, default=3, help="repeats per point (default 3)")
-    p.add_argument("--budget", type=float, default=1.0, metavar="S", help="drop a point slower than S s per frame")
-    p.add_argument("--timeout", type=float, default=120.0, metavar="S", help="per point (default 120)")
-    p.add_argument("--quick", action="store_true", help="a smoke run: 3 frames, 1 repeat")
-    p.add_argument("--out", metavar="DIR", help="output folder (default results/tune-<date>-<time>)")
-    p.add_argument("--report-dir", metavar="DIR", help="where --families writes TUNING.md (default docs/)")
-    args = p.parse_args(argv)
-    check_trial_options(args)
+    add_trial_options(p, frames=10, repeat=3, budget=1.0, timeout=120.0)
+    add_quick_option(p, "3 frames, 1 repeat", frames=3, repeat=1)
+    add_output_options(p, "tune", report_dir="docs/")
+    return p
+
+
+def parse(argv: list[str] | None):
+    args = parse_checked(parser(), argv)
     try:
         args.sizes = [int(v) for v in args.sizes.split(",")] if args.sizes else None
     except ValueError:
@@ -304,43 +282,62 @@ def parse(argv):
     return args
 
 
+def points_table(rows: pd.DataFrame) -> pd.DataFrame:
+    """tune.csv: one line per measured point (backend, knob, value, time, spread, misses)."""
+    lines = summarise(rows, ["job"], first=["backend", "experiment", "scene", "dist", "n", "radius_min", "radius_max",
+                                            "seed"]).reset_index()
+    params = lines.job.map(lambda key: json.loads(key)["params"])
+    lines["value"] = [p.get(step) for p, step in zip(params, lines.experiment)]
+    lines = lines.rename(columns={"experiment": "param", "total_ms": "median_ms"})
+    return lines[["backend", "param", "value", "params", "status", "median_ms", "low_ms", "high_ms", "missed",
+                  "scene", "dist", "n", "radius_min", "radius_max", "seed"]]
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
-    out = prepare_out(args.out, "tune")
-    record = Recorder(out / "tune.csv")
-    try:
-        if args.families:
-            report_dir = Path(args.report_dir) if args.report_dir else DOCS
-            families_report(out, report_dir, args, record)
-            print(f"\nwrote {out / 'tune.csv'}, {out / 'families.csv'}, {report_dir / 'TUNING.md'}")
-            return 0
-        chosen = tunable(matched_backends(args.backends))
-        if not chosen:
-            raise CliError(f"none of {args.backends!r} has parameters to tune; tunable: {', '.join(KNOBS)}")
-        missing = warn_unavailable(chosen)
-        backends = [b for b in chosen if b not in missing]
-        base = scene_from_args(args)
-        best = []
-        for n in args.sizes or [base.n]:
-            scene = base if n == base.n else scene_from_args(argparse.Namespace(**{**vars(args), "n": n}))
-            traj = simulate(scene, args.frames + 1)
-            print(f"scene {scene.name}: n={scene.n}, radii {scene.radius_range[0]:g}..{scene.radius_range[1]:g}, "
-                  f"{args.frames} frames x {args.repeat} repeats per point")
-            results = run_tune(traj, backends, args, record)
-            best += best_rows(results, scene.n)
-            plot_sweeps(results, out / f"tune_n{scene.n}.png", f"{scene.name}, n={scene.n}")
-        table = pd.DataFrame(best)
-        table.to_csv(out / "best.csv", index=False)
-        if args.sizes:
-            plot_optimum_against_n(table, out / "optimum_vs_n.png")
-        write_json(out / "meta.json", run_metadata(command_line("tune", argv), {"unavailable": missing}))
-        print(f"\nwrote {out}/: tune.csv (every point), best.csv, tune_n*.png"
-              + (", optimum_vs_n.png" if args.sizes else "") + ", meta.json")
-        if missing:
-            print(f"NOT RUN (unavailable here): {', '.join(missing)}")
+    if args.report_only:  # the same study, replayed from its rows: nothing is measured
+        return study(args, argv, Runner(replay=stored_runs(Path(args.out))), Path(args.out))
+    with Output(args.out, "tune", command_line("tune", argv), args.resume) as out:
+        writer = RowWriter(out.path, args.resume)
+        code = study(args, argv, Runner(writer, out), out.path)
+        writer.finish()
+    rows, _ = read_rows(out.path)
+    points_table(rows).to_csv(out.path / "tune.csv", index=False)
+    print(f"wrote {out.path / 'tune.csv'} (every point) and results.csv (every frame)")
+    return code
+
+
+def study(args, argv, runner: Runner, out: Path) -> int:
+    if args.families:
+        report_dir = Path(args.report_dir) if args.report_dir else docs_folder()
+        families_report(runner, out, report_dir, args)
+        print(f"\nwrote {out / 'families.csv'}, {report_dir / 'TUNING.md'}")
         return 0
-    finally:
-        record.close()
+    chosen = matched_backends(args.backends)
+    missing = warn_unavailable(chosen) if args.backends != "*" else {}  # "*": every one here with knobs
+    backends = tunable([b for b in chosen if b not in missing])
+    if not backends:
+        raise CliError(f"none of {args.backends!r} has parameters to tune; tunable: "
+                       f"{', '.join(tunable(engines.names()))}")
+    base = scene_from_args(args)
+    best = []
+    for n in args.sizes or [base.n]:
+        scene = base if n == base.n else scene_from_args(argparse.Namespace(**{**vars(args), "n": n}))
+        print(f"scene {scene.name}: n={scene.n}, radii {scene.radius_range[0]:g}..{scene.radius_range[1]:g}, "
+              f"{args.frames} frames x {args.repeat} repeats per point")
+        results = run_tune(runner, scene, backends, args)
+        best += best_rows(results, scene.n)
+        plot_sweeps(results, out / f"tune_n{scene.n}.png", f"{scene.name}, n={scene.n}")
+    table = pd.DataFrame(best)
+    table.to_csv(out / "best.csv", index=False)
+    if args.sizes:
+        plot_optimum_against_n(table, out / "optimum_vs_n.png")
+    if runner.output is not None:
+        runner.output.meta(unavailable=missing)
+    print(f"\nwrote {out}/: best.csv, tune_n*.png" + (", optimum_vs_n.png" if args.sizes else "") + ", meta.json")
+    if missing:
+        print(f"NOT RUN (unavailable here): {', '.join(missing)}")
+    return 0
 
 
 if __name__ == "__main__":

@@ -2,8 +2,14 @@
 
 from __future__ import annotations
 
+import os
+import signal
+from functools import cache
+
 from engines import registry
 from own.brute import Brute
+
+TEST_FAMILY = registry.Family("test", "library", "test-only backends", "tab:gray")
 
 
 class Lossy(Brute):
@@ -16,7 +22,19 @@ class Lossy(Brute):
         return super()._pairs()[int(self.params["drop"]):]
 
 
+class Crashes(Brute):
+    """Dies of a segfault in the pair search, as a broken engine binding would."""
+
+    name = "test.crash"
+
+    def _pairs(self):
+        os.kill(os.getpid(), signal.SIGSEGV)
+
+
 def register(monkeypatch, *classes) -> None:
+    """Register test backends (family "test") for the duration of one test."""
+    monkeypatch.setitem(registry.FAMILIES, "test", TEST_FAMILY)
     for cls in classes:
-        monkeypatch.setitem(registry.BACKENDS, cls.name, f"{__name__}:{cls.__name__}")
-    registry._load.cache_clear()
+        monkeypatch.setitem(registry.BACKENDS, cls.name, f"{cls.__module__}:{cls.__name__}")
+    # A fresh cache of loaded classes for this test; the registry's own comes back afterwards.
+    monkeypatch.setattr(registry, "_load", cache(registry._load.__wrapped__))

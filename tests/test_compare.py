@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import signal
 import subprocess
 import sys
 import time
@@ -15,12 +13,14 @@ import pandas as pd
 import pytest
 
 from engines import registry
+from fakes import Crashes, register
 from own.brute import Brute
 from scenes import generate
 from scenes.motion import simulate
 from studies.compare import main
-from studies.harness import COLUMNS, Job, run_isolated
-from studies.summary import ours_against_engines
+from studies.lib.harness import Job, run_isolated
+from studies.lib.results import COLUMNS
+from studies.lib.tables import ours_against_engines
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -103,19 +103,12 @@ def test_list_names_every_backend_with_its_availability(capsys):
 
 
 def main_cli(argv):
-    from studies.cli import run_cli
+    from studies.lib.cli import run_cli
 
     return run_cli("compare", main, argv)
 
 
 # --- isolation: a backend that crashes, hangs or fails is recorded, and the study goes on ---
-
-
-class Crashes(Brute):
-    name = "test.crash"
-
-    def _pairs(self):
-        os.kill(os.getpid(), signal.SIGSEGV)
 
 
 class Hangs(Brute):
@@ -169,11 +162,7 @@ class SlowFromTheSecondRepeat(Brute):
 
 @pytest.fixture
 def misbehaving(monkeypatch):
-    for cls in (Crashes, Hangs, Fails, Backwards, NotANumber, Hog, SlowFromTheSecondRepeat):
-        monkeypatch.setitem(registry.BACKENDS, cls.name, f"{__name__}:{cls.__name__}")
-    registry._load.cache_clear()
-    yield
-    registry._load.cache_clear()
+    register(monkeypatch, Crashes, Hangs, Fails, Backwards, NotANumber, Hog, SlowFromTheSecondRepeat)
 
 
 @pytest.fixture(scope="module")

@@ -19,7 +19,7 @@ from hypothesis import assume, given, settings
 
 import engines
 from engines.pairs import is_canonical, missing
-from engines.reference import box_pairs, circle_pairs
+from own.reference import box_pairs, circle_pairs
 from scenes import generate
 from scenes.motion import simulate
 from strategies import BOUNDARY, any_scene

@@ -13,7 +13,7 @@ import engines
 from own.brute import brute_pairs
 from scenes import generate
 from studies.essay import search_best_p
-from studies.essay_plan import Plan, fixed_runs
+from studies.lib.essay_plan import Plan, fixed_runs
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -99,7 +99,7 @@ def test_quick_study_end_to_end_and_resume(tmp_path):
 
 
 def test_report_only_needs_a_finished_study(tmp_path, capsys):
-    from studies.cli import run_cli
+    from studies.lib.cli import run_cli
     from studies.essay import main
 
     assert run_cli("essay", main, ["--report-only", "--out", str(tmp_path / "none")]) == 2

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import engines
-from engines.pairs import canonical, is_canonical, narrow_phase
-from engines.reference import BRUTE_FORCE_LIMIT, box_pairs
+from engines.pairs import canonical, is_canonical
+from own.reference import BRUTE_FORCE_LIMIT, box_pairs, narrow_phase
 from own.brute import brute_pairs
 from scenes import generate
 

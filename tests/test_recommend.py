@@ -11,10 +11,10 @@ from scenes import generate
 from scenes.io import save_scene
 from scenes.motion import simulate
 from studies import recommend
-from studies.cli import run_cli
+from studies.lib.cli import run_cli
 from studies.recommend import Entry, rank, verdict
-from studies.traits import measure_traits
-from studies.trials import Trial
+from studies.lib.traits import measure_traits
+from studies.lib.trials import Trial
 
 
 def entry(name, ms, low, high, missed=0, status="ok"):

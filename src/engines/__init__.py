@@ -1,6 +1,7 @@
 """Broad phases behind one interface: `create(name, **params)`, `names()`, `available()`."""
 
 from .base import BroadPhase, PairArray
-from .registry import available, backend_class, create, match, names, unavailable
+from .registry import FAMILIES, Family, available, backend_class, create, family, match, names, of_kind, unavailable
 
-__all__ = ["BroadPhase", "PairArray", "available", "backend_class", "create", "match", "names", "unavailable"]
+__all__ = ["FAMILIES", "BroadPhase", "Family", "PairArray", "available", "backend_class", "create", "family", "match",
+           "names", "of_kind", "unavailable"]

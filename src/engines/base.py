@@ -8,12 +8,15 @@ i < j in every row, no pair twice. What a backend promises about those pairs is 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import Any, ClassVar, Literal
+from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
 import numpy as np
 import numpy.typing as npt
 
 from scenes.scene import check_positions, check_radii
+
+if TYPE_CHECKING:
+    from .knobs import Knob
 
 PairArray = npt.NDArray[np.int64]
 
@@ -28,15 +31,21 @@ Reports = Literal["boxes", "contacts"]
 class BroadPhase(ABC):
     """Base class: subclasses implement `_reset`, `_update` and `_pairs` on validated arrays.
 
-    Class attributes describe the backend: `name` ("family.variant"), `reports` (see above),
-    `exact` (True when the pairs are exactly the box overlaps, no extra candidates), and
-    `defaults`, the tunable parameters with their defaults. Unknown parameters are an error.
+    Class attributes describe the backend: `name` ("family.variant"; the family's metadata is in
+    the registry), `reports` (see above), `exact` (True when the pairs are exactly the box
+    overlaps, no extra candidates), `defaults`, the parameters with their defaults (unknown
+    parameters are an error), `sweeps`, the values a tuning sweep tries for some of them, `method`,
+    the kind of structure ("grid", "hash", "sweep", "tree", "kdtree", "brute"), and `breaks`, what
+    the evidence tests established about the inputs it mishandles (empty when none).
     """
 
     name: ClassVar[str] = ""
     reports: ClassVar[Reports] = "boxes"
     exact: ClassVar[bool] = True
     defaults: ClassVar[dict[str, Any]] = {}
+    sweeps: ClassVar[tuple["Knob", ...]] = ()
+    method: ClassVar[str] = ""
+    breaks: ClassVar[str] = ""
 
     def __init__(self, **params: Any) -> None:
         unknown = sorted(set(params) - set(self.defaults))

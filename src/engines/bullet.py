@@ -49,6 +49,10 @@ class _Bullet(BroadPhase):
     exact = False
     reports = "contacts"
     reset_flags = 0
+    breaks = ("Bullet stops simulating a non-static object whose AABB extent has a squared length of 1e12 or more "
+              "(btCollisionWorld::updateSingleAabb), i.e. spheres of radius ~5.8e5 and up; it cannot create spheres "
+              "of radius 0. Its margins are absolute, larger than a scene scaled by 1e-6: see its time and memory "
+              "there in the table below.")
 
     def __init__(self, **params):
         super().__init__(**params)
@@ -111,6 +115,7 @@ class BulletDbvt(_Bullet):
     incremental re-insertion; Bullet's default broad phase."""
 
     name = "bullet.dbvt"
+    method = "tree"
 
 
 class BulletSimple(_Bullet):
@@ -118,4 +123,5 @@ class BulletSimple(_Bullet):
     RESET_USE_SIMPLE_BROADPHASE flag), a reference inside the engine."""
 
     name = "bullet.simple"
+    method = "brute"
     reset_flags = pybullet.RESET_USE_SIMPLE_BROADPHASE

@@ -15,6 +15,7 @@ import pymunk
 import pymunk.batch as batch
 
 from .base import BroadPhase
+from .knobs import HASH_CELL_FACTORS, Knob, mean_diameter, sizes
 from .pairs import canonical
 
 SHAPES = ("box", "circle")
@@ -103,6 +104,7 @@ class ChipmunkTree(_Chipmunk):
     velocity term) and a per-leaf pair cache, so unmoved leaves keep their pairs (temporal coherence)."""
 
     name = "chipmunk.bbtree"
+    method = "tree"
 
 
 class ChipmunkHash(_Chipmunk):
@@ -113,7 +115,10 @@ class ChipmunkHash(_Chipmunk):
     """
 
     name = "chipmunk.hash"
+    method = "hash"
     defaults = {"shape": "box", "dim": None, "count": None}
+    sweeps = (Knob("dim", sizes(mean_diameter, HASH_CELL_FACTORS), "hash cell size dim"),
+              Knob("count", lambda s: [max(1000, int(f * s.n)) for f in (1, 3, 10, 30)], "hash table size count"))
 
     def _configure(self, space, positions, radii):
         dim = self.params["dim"]

@@ -13,6 +13,7 @@ import coal
 import numpy as np
 
 from .base import BroadPhase
+from .knobs import HASH_CELL_FACTORS, Knob, mean_diameter, sizes
 from .pairs import canonical
 
 MAX_CONTACTS = 1 << 30
@@ -65,44 +66,51 @@ class _Coal(BroadPhase):
 class CoalNaive(_Coal):
     """All pairs tested (coal's reference manager)."""
 
-    name, manager = "coal.naive", "NaiveCollisionManager"
+    name, manager, method = "coal.naive", "NaiveCollisionManager", "brute"
 
 
 class CoalSap(_Coal):
     """Sweep and prune on all three axes with incremental updates."""
 
-    name, manager = "coal.sap", "SaPCollisionManager"
+    name, manager, method = "coal.sap", "SaPCollisionManager", "sweep"
+    breaks = ("coal's SaP misses overlaps depending on the order objects were registered in, and segfaults on "
+              "spheres of radius 0.")
 
 
 class CoalSimpleSap(_Coal):
     """Simple sweep and prune: sorted along the axis of largest variance."""
 
-    name, manager = "coal.ssap", "SSaPCollisionManager"
+    name, manager, method = "coal.ssap", "SSaPCollisionManager", "sweep"
 
 
 class CoalIntervalTree(_Coal):
     """Interval trees over the three axes."""
 
-    name, manager = "coal.interval", "IntervalTreeCollisionManager"
+    name, manager, method = "coal.interval", "IntervalTreeCollisionManager", "tree"
+    breaks = "coal's interval tree misses spheres that touch exactly along x, and zero-radius spheres."
 
 
 class CoalTree(_Coal):
     """Dynamic AABB tree (FCL's default manager)."""
 
-    name, manager = "coal.tree", "DynamicAABBTreeCollisionManager"
+    name, manager, method = "coal.tree", "DynamicAABBTreeCollisionManager", "tree"
+    breaks = "coal's dynamic AABB tree rejects zero-volume boxes ('The bounding volume has a negative volume')."
 
 
 class CoalTreeArray(_Coal):
     """Dynamic AABB tree stored in an array."""
 
-    name, manager = "coal.tree_array", "DynamicAABBTreeArrayCollisionManager"
+    name, manager, method = "coal.tree_array", "DynamicAABBTreeArrayCollisionManager", "tree"
 
 
 class CoalHash(_Coal):
     """Spatial hashing over the scene's extent; `cell` defaults to two mean diameters."""
 
     name = "coal.hash"
+    method = "hash"
     defaults = {"cell": None}
+    sweeps = (Knob("cell", sizes(mean_diameter, HASH_CELL_FACTORS), "hash cell size"),)
+    breaks = "coal's spatial hash misses some exactly touching pairs, and zero-radius spheres."
 
     def _manager(self, positions, radii):
         cell = self.params["cell"] or (4.0 * float(radii.mean()) if len(radii) else 1.0)

@@ -30,6 +30,7 @@ class FclTree(BroadPhase):
     """FCL's dynamic AABB tree (the only manager python-fcl exposes)."""
 
     name = "fcl.tree"
+    method = "tree"
     exact = False
     reports = "boxes"
 

@@ -1,8 +1,7 @@
-"""Pair arrays: canonical form, set operations by integer key, and the shared exact narrow phase."""
+"""Pair arrays, the format of the interface: canonical form, checks, set operations by integer key."""
 
 from __future__ import annotations
 
-import numba as nb
 import numpy as np
 
 from .base import EMPTY_PAIRS, PairArray
@@ -53,20 +52,3 @@ def is_canonical(pairs: np.ndarray, n: int) -> str | None:
     if np.unique(k).size != k.size:
         return f"{k.size - np.unique(k).size} pair(s) reported twice"
     return None
-
-
-@nb.njit(cache=True)
-def narrow_phase(positions: np.ndarray, radii: np.ndarray, pairs: np.ndarray) -> PairArray:
-    """The exact narrow phase shared by every backend: the candidate pairs whose circles truly
-    overlap, distance <= r_i + r_j (touching counts). The rows are gathered in the same pass as
-    the test: numpy's boolean indexing of them cost twice the test itself at n = 2048."""
-    out = np.empty((pairs.shape[0], 2), dtype=pairs.dtype)
-    count = 0
-    for k in range(pairs.shape[0]):
-        i, j = pairs[k, 0], pairs[k, 1]
-        dx = positions[j, 0] - positions[i, 0]
-        dy = positions[j, 1] - positions[i, 1]
-        reach = radii[i] + radii[j]
-        out[count, 0], out[count, 1] = i, j  # kept only if the circles overlap (branch-free)
-        count += dx * dx + dy * dy <= reach * reach
-    return out[:count]

@@ -1,14 +1,66 @@
-"""The registry of backends: name -> where its class lives. Importing is lazy, so a missing
-engine package only makes its own backends unavailable, with the reason kept for `--list`."""
+"""The registry of backends: name -> where its class lives, and each family's metadata.
+
+Importing is lazy, so a missing engine package only makes its own backends unavailable, with the
+reason and the line that installs it kept for `--list`. What a study needs to know about a backend
+comes from here (its family: kind, package, install line, colour) or from its class (what it
+reports, its parameters and their sweep values, its kind of structure): adding an engine is one
+adapter module, one entry in BACKENDS, and its family in FAMILIES.
+"""
 
 from __future__ import annotations
 
 import fnmatch
 import importlib
+from dataclasses import dataclass
 from functools import cache
-from typing import Any
+from typing import Any, Literal
 
 from .base import BroadPhase
+
+Kind = Literal["own", "essay", "engine", "library"]
+
+
+@dataclass(frozen=True)
+class Family:
+    """What the backends of one family ("chipmunk" in "chipmunk.bbtree") share.
+
+    `kind`: "own" (our compiled code), "essay" (the essay's Python methods), "engine" (a physics
+    engine's broad phase: what our backends are set against) or "library" (a general-purpose
+    library). `requirement` is the pinned distribution as pyproject.toml lists it, `extra` the
+    optional extra that installs it when it is not an ordinary dependency.
+    """
+
+    name: str
+    kind: Kind
+    title: str
+    colour: str  # one matplotlib colour per family, the same in every figure
+    requirement: str = ""
+    extra: str = ""
+
+    @property
+    def package(self) -> str:
+        """The distribution's name ("pymunk"), or "" for the project's own code."""
+        return self.requirement.split("=")[0].split(">")[0].split("<")[0].strip()
+
+    @property
+    def install(self) -> str:
+        """The command that installs this family's package."""
+        if not self.requirement:
+            return "part of this project"
+        if self.extra:
+            return f'pip install -e ".[{self.extra}]"'
+        return f'pip install "{self.requirement}"'
+
+
+FAMILIES: dict[str, Family] = {f.name: f for f in [
+    Family("own", "own", "our compiled broad phases (numba)", "tab:blue"),
+    Family("essay", "essay", "the essay's methods in pure Python", "tab:orange"),
+    Family("chipmunk", "engine", "Chipmunk2D through pymunk", "tab:green", "pymunk==7.3.1"),
+    Family("bullet", "engine", "Bullet through pybullet", "tab:purple", "pybullet==3.2.7"),
+    Family("fcl", "engine", "FCL through python-fcl", "tab:brown", "python-fcl==0.7.0.11"),
+    Family("coal", "engine", "coal, the maintained FCL fork", "tab:pink", "coal==3.0.3"),
+    Family("scipy", "library", "scipy's k-d tree", "tab:olive", "scipy>=1.11"),
+]}
 
 # name -> "module:Class". Engine adapters import their binding at module level, so an import
 # failure of the module is exactly "this engine is not usable here".
@@ -21,8 +73,8 @@ BACKENDS: dict[str, str] = {
     "own.grid_incremental": "own.grid_incremental:IncrementalGrid",
     "own.quadtree": "own.quadtree:Quadtree",
     "own.bvh": "own.bvh:LinearBvh",
-    "own.grid_swept": "engines.swept:SweptGrid",
-    "own.sap_swept": "engines.swept:SweptSap",
+    "own.grid_swept": "own.swept:SweptGrid",
+    "own.sap_swept": "own.swept:SweptSap",
     "essay.sap": "own.essay.sap:EssaySweepAndPrune",
     "essay.grid": "own.essay.grid:EssayGrid",
     "essay.quadtree": "own.essay.quadtree:EssayQuadtree",
@@ -47,6 +99,19 @@ def names() -> list[str]:
     return list(BACKENDS)
 
 
+def family(name: str) -> Family:
+    """The family of a backend name ("chipmunk" for "chipmunk.bbtree"); unknown families are an error."""
+    prefix = name.split(".")[0]
+    if prefix not in FAMILIES:
+        raise ValueError(f"backend {name!r} belongs to no registered family; known: {', '.join(FAMILIES)}")
+    return FAMILIES[prefix]
+
+
+def of_kind(name: str, *kinds: Kind) -> bool:
+    """Whether the backend's family is of one of these kinds ("own", "essay", "engine", "library")."""
+    return family(name).kind in kinds
+
+
 @cache
 def _load(name: str) -> type[BroadPhase] | str:
     """The backend class, or the reason it cannot be imported here."""
@@ -62,7 +127,8 @@ def backend_class(name: str) -> type[BroadPhase]:
         raise ValueError(f"unknown backend {name!r}; known: {', '.join(BACKENDS)}")
     loaded = _load(name)
     if isinstance(loaded, str):
-        raise ValueError(f"backend {name!r} is not available here ({loaded})")
+        raise ValueError(f"backend {name!r} is not available here ({loaded}); install it with: "
+                         f"{family(name).install}")
     return loaded
 
 
@@ -72,8 +138,8 @@ def available() -> list[str]:
 
 
 def unavailable() -> dict[str, str]:
-    """Name -> reason, for every backend that cannot run here."""
-    return {n: r for n in BACKENDS if isinstance(r := _load(n), str)}
+    """Name -> why it cannot run here, with the line that installs it."""
+    return {n: f"{r}; install it with: {family(n).install}" for n in BACKENDS if isinstance(r := _load(n), str)}
 
 
 def create(name: str, **params: Any) -> BroadPhase:

@@ -16,6 +16,7 @@ from .base import EMPTY_PAIRS, BroadPhase
 
 class KDTree(BroadPhase):
     name = "scipy.kdtree"
+    method = "kdtree"
     exact = False  # exact after the filter, unless query_pairs' own rounding drops a touching pair
     reports = "boxes"
 

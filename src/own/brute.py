@@ -36,6 +36,7 @@ class Brute(BroadPhase):
     """Tests all n(n-1)/2 pairs. The reference the tests compare every other backend with."""
 
     name = "own.brute"
+    method = "brute"
 
     def _reset(self, positions, radii):
         self._pos = positions

@@ -17,6 +17,7 @@ import numba as nb
 import numpy as np
 
 from engines.base import BroadPhase
+from engines.knobs import Knob, fixed
 
 from .common import PairCollector, centre_extents, scan_boxes
 from .morton import bit_length, interleave
@@ -156,7 +157,9 @@ class LinearBvh(BroadPhase):
     leaf (8 measured best of 2..16 at n = 2048 and 2^17: 2x faster than 2, 1.4x than 4)."""
 
     name = "own.bvh"
+    method = "tree"
     defaults = {"leaf_size": 8}
+    sweeps = (Knob("leaf_size", fixed([1, 2, 4, 8, 16]), "objects per leaf"),)
 
     def __init__(self, **params):
         super().__init__(**params)

@@ -27,6 +27,7 @@ import numba as nb
 import numpy as np
 
 from engines.base import BroadPhase
+from engines.knobs import Knob, mean_diameter, sizes
 
 from .common import PairCollector, centre_extents, emit
 
@@ -363,12 +364,21 @@ def default_cell(radii: np.ndarray) -> float:
     return 2.0 * min(float(radii.max()), LARGE_RADIUS_IN_MEDIANS * float(np.median(radii)))
 
 
+# The cell sizes a tuning sweep tries, as multiples of the default cell (docs/TUNING.md).
+GRID_CELL_FACTORS = (0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 3.0, 4.0, 6.0)
+GRID_CELL = Knob("cell", sizes(lambda s: default_cell(s.radii) or mean_diameter(s), GRID_CELL_FACTORS),
+                 "requested cell size")
+
+
 class CellLayout(BroadPhase):
     """What the grids share: the `p` and `cell` parameters, checked, the layout they start, and
     the cells for drawing. Give `p` for p x p cells over the extent (the essay's parameter) or
     `cell` for a cell size; with neither, a cell is one diameter of the largest object, but at
     most 4 median diameters (see `default_cell`), enlarged to at most MAX_CELLS_PER_OBJECT cells
     per object."""
+
+    method = "grid"
+    sweeps = (GRID_CELL,)
 
     def __init__(self, **params):
         super().__init__(**params)

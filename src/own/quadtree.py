@@ -23,6 +23,7 @@ import numba as nb
 import numpy as np
 
 from engines.base import BroadPhase
+from engines.knobs import Knob, fixed
 
 from .common import PairCollector, gather, insertion_sort, scan_columns
 from .morton import bit_length, interleave
@@ -226,6 +227,9 @@ class Quadtree(BroadPhase):
     # 8192), 16 and 32 came within 10-14 % of each scene's best capacity on average, 8 was 23 %
     # off; on the uniform scene at n = 2048, 2^17 and 2^20, 32 was best of 8..64 or within noise.
     defaults = {"capacity": 32, "max_depth": 16, "coherent": True}
+    sweeps = (Knob("capacity", fixed([1, 2, 4, 8, 16, 32, 64]), "capacity (objects per leaf)"),
+              Knob("max_depth", fixed([4, 6, 8, 10, 12, 16, 24]), "maximum depth"))
+    method = "tree"
 
     def __init__(self, **params):
         super().__init__(**params)

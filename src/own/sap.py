@@ -6,6 +6,7 @@ import numba as nb
 import numpy as np
 
 from engines.base import BroadPhase
+from engines.knobs import Knob, fixed
 
 from .common import PairCollector, emit, gather, insertion_sort
 from .parallel import ChunkedPairCollector
@@ -259,6 +260,9 @@ class SweepAndPrune(BroadPhase):
     """
 
     name = "own.sap"
+    method = "sweep"
+    sweeps = (Knob("axis", fixed(["x", "y", "auto"]), "sweep axis"),
+              Knob("sweep", fixed(["plain", "sparse", "auto"]), "sweep"))
     defaults = {"axis": "auto", "incremental": False, "sweep": "auto", "parallel": False,
                 "parallel_from": PARALLEL_FROM_OVERLAPS}
 

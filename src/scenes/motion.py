@@ -13,8 +13,7 @@ from functools import cached_property
 import numba as nb
 import numpy as np
 
-from engines.reference import box_pairs
-from engines.pairs import narrow_phase
+from own.reference import box_pairs, narrow_phase
 
 from .scene import Scene
 

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import math
 
+from engines.knobs import Knob, fixed
+
 from .particle import EssayBroadPhase, Particle, ordered
 
 
@@ -23,7 +25,9 @@ class EssayGrid(EssayBroadPhase):
     """p x p cells over the square around the centres; p defaults to `default_p`."""
 
     name = "essay.grid"
+    method = "grid"
     defaults = {"p": None, "printed_defects": False}
+    sweeps = (Knob("p", fixed([4, 8, 16, 24, 32, 48, 64, 96]), "cells per side p"),)
 
     def __init__(self, **params):
         super().__init__(**params)

@@ -20,6 +20,7 @@ class EssayBroadPhase(BroadPhase):
     """Rebuilds from Python objects every frame, as the essay does; subclasses find pairs from them."""
 
     exact = False
+    breaks = "pure Python: dense scenes exceed the time budget."
 
     def _reset(self, positions, radii):
         self._particles = [

@@ -12,6 +12,8 @@ particles are counted (`inserted` in the stats).
 
 from __future__ import annotations
 
+from engines.knobs import Knob, fixed
+
 from .particle import EssayBroadPhase, Particle, ordered
 
 
@@ -58,7 +60,9 @@ class EssayQuadtree(EssayBroadPhase):
     """Point quadtree with `capacity` points per node (the essay's kappa, best at 4-5)."""
 
     name = "essay.quadtree"
+    method = "tree"
     defaults = {"capacity": 5, "max_depth": 32, "printed_defects": False}
+    sweeps = (Knob("capacity", fixed([1, 2, 3, 5, 8, 12, 20]), "capacity (objects per leaf)"),)
 
     def __init__(self, **params):
         super().__init__(**params)

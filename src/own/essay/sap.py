@@ -11,6 +11,7 @@ class EssaySweepAndPrune(EssayBroadPhase):
     """Reports every pair whose x intervals overlap; the narrow phase absorbs the rest."""
 
     name = "essay.sap"
+    method = "sweep"
 
     def _find(self, particles: list[Particle]) -> set[tuple[int, int]]:
         ends = [(p.x - p.r, START, p.index, p) for p in particles]

@@ -11,10 +11,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from scenes.motion import Trajectory
+import engines
+from engines.knobs import Knob
+from scenes import Scene
 
-from .knobs import KNOBS, Knob
-from .trials import Trial, run_trial
+from .trials import Trial
 
 
 @dataclass
@@ -45,27 +46,32 @@ class Tuned:
 
     @property
     def default_within_noise(self) -> bool:
-        return self.best is not None and self.default is not None and self.default.ok and self.default.overlaps(self.best)
+        return (self.best is not None and self.default is not None and self.default.ok
+                and self.default.overlaps(self.best))
 
 
-Record = Callable[[str, str, Any, Trial], None]
+# measure(params, step) -> the trial of the backend with these parameters; `step` names the point
+# for the study's rows: the knob swept, "best" or "default".
+Measure = Callable[[dict[str, Any], str], Trial]
 
 
-def tune_backend(traj: Trajectory, backend: str, repeats: int = 3, budget_s: float = float("inf"),
-                 timeout_s: float = 120.0, record: Record | None = None,
-                 knobs: list[Knob] | None = None, with_default: bool = True) -> Tuned:
-    """Sweep every knob of `backend` on `traj`; `record(backend, param, value, trial)` sees each point.
-    With `with_default`, the default parameters are measured too (Tuned.default)."""
+def tunable(names: list[str]) -> list[str]:
+    """The backends among `names` that have knobs to sweep (the unavailable ones are left out)."""
+    here = set(engines.available())
+    return [n for n in names if n in here and engines.backend_class(n).sweeps]
+
+
+def tune_backend(scene: Scene, backend: str, measure: Measure, knobs: tuple[Knob, ...] | None = None,
+                 with_default: bool = True) -> Tuned:
+    """Sweep every knob of `backend` (its class's `sweeps`, or `knobs`) on `scene`, measuring each
+    point with `measure`. With `with_default`, the default parameters are measured too (Tuned.default)."""
     params: dict[str, Any] = {}
     sweeps = []
     best: Trial | None = None
-    for knob in KNOBS[backend] if knobs is None else knobs:
+    for knob in engines.backend_class(backend).sweeps if knobs is None else knobs:
         points = []
-        for value in knob.values(traj.scene):
-            trial = run_trial(traj, backend, {**params, knob.param: value}, repeats, budget_s, timeout_s)
-            points.append((value, trial))
-            if record:
-                record(backend, knob.param, value, trial)
+        for value in knob.values(scene):
+            points.append((value, measure({**params, knob.param: value}, knob.param)))
         sweep = Sweep(knob, dict(params), points)
         sweeps.append(sweep)
         found = sweep.best()
@@ -77,10 +83,6 @@ def tune_backend(traj: Trajectory, backend: str, repeats: int = 3, budget_s: flo
     # The best of many noisy points is biased low (the winner's curse): the loss of the default
     # comes from the best setting and the default measured again, one after the other.
     if best is not None:
-        best = run_trial(traj, backend, params, repeats, budget_s, timeout_s)
-        if record:
-            record(backend, "best", None, best)
-    default = run_trial(traj, backend, {}, repeats, budget_s, timeout_s)
-    if record:
-        record(backend, "default", None, default)
+        best = measure(params, "best")
+    default = measure({}, "default")
     return Tuned(backend, params if best else {}, best, default, sweeps)

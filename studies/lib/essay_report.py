@@ -1,4 +1,4 @@
-"""Figures and the written report of the essay study, generated from its results.csv.
+"""Figures and the written report of the essay study, generated from its rows.
 
 Every number in the report is computed here from the measured rows (or, for the essay's own
 figures, from its published raw data in studies/data/essay_raw.csv); verdicts are rules on those
@@ -7,62 +7,35 @@ numbers, so a new run on another machine rewrites the text to match what it meas
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+import pandas as pd
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-
-from .essay_plan import TITLES  # noqa: E402
+from .essay_plan import TITLES
+from .figures import colours, new_figure, save
+from .results import read_rows, summarise
 
 ESSAY_RAW = Path(__file__).with_name("data") / "essay_raw.csv"
 ESSAY_NAMES = {"sap_x": "essay.sap", "grid": "essay.grid", "quadtree": "essay.quadtree"}
 COMPILED = {"essay.sap": "own.sap(axis=x)", "essay.grid": "own.grid", "essay.quadtree": "own.quadtree"}
 STAGES = ["update", "pairs", "narrow"]
-# Stable colours per backend across all figures.
-COLOURS = {
-    "essay.sap": "tab:orange", "essay.grid": "tab:red", "essay.quadtree": "tab:brown",
-    "own.sap(axis=x)": "tab:blue", "own.sap": "tab:blue", "own.grid": "tab:cyan", "own.quadtree": "tab:purple",
-    "own.sap_incremental": "tab:olive", "chipmunk.bbtree": "tab:green", "chipmunk.hash": "lime",
-    "bullet.dbvt": "tab:pink", "fcl.tree": "tab:gray", "coal.tree": "gold", "scipy.kdtree": "black",
-    "own.sap(axis=y)": "tab:green", "own.sap(axis=auto)": "tab:purple",
-}
+RUN_COLUMNS = ["experiment", "backend", "label", "dist", "n", "radius_min", "radius_max", "speed", "seed"]
 
 
 # --- from rows to one line per run ------------------------------------------------------
 
 
 def summarise_runs(rows: pd.DataFrame) -> pd.DataFrame:
-    """One row per run: medians per stage (ms), spread, work counts, misses, outcome."""
-    ok = rows[rows.status == "ok"].copy()
-    ok["t_ms"] = ok.t_total_s * 1e3
-    stats = ok["stats"].fillna("{}").map(json.loads).apply(pd.Series)
-    ok = pd.concat([ok, stats.add_prefix("stat_")], axis=1)
-    g = ok.groupby("run_key", sort=False)
-    out = g[["experiment", "backend", "label", "dist", "n", "radius_min", "radius_max", "speed", "seed"]].first()
-    out["ms"] = g.t_ms.median()
-    out["q25_ms"], out["q75_ms"] = g.t_ms.quantile(0.25), g.t_ms.quantile(0.75)
-    for stage in STAGES:
-        out[f"{stage}_ms"] = g[f"t_{stage}_s"].median() * 1e3
-    for col in ("candidates", "true_pairs", "box_pairs"):
-        out[col] = g[col].median()
-    out["missed"] = g.missed.sum()
-    out["false_positives"] = g.false_positives.median()
-    out["frames"] = g.size()
-    for col in [c for c in ok.columns if c.startswith("stat_")]:
-        out[col] = pd.to_numeric(g[col].median(), errors="coerce")
-    failed = rows[~rows.run_key.isin(out.index)].groupby("run_key").first()
-    if len(failed):
-        out = pd.concat([out, failed[["experiment", "backend", "label", "dist", "n", "radius_min", "radius_max",
-                                      "speed", "seed"]].assign(ms=np.inf, status=failed.status)])
-    out["status"] = out.get("status", pd.Series(index=out.index, dtype=object)).fillna("ok")
+    """One line per run (job): the shared summary with the run's columns and the backend's
+    counters; a run that did not finish has an infinite frame period."""
+    out = summarise(rows, ["job"], first=RUN_COLUMNS, stats=True)
+    out = out.rename(columns={"total_ms": "ms"})
+    out.loc[~np.isfinite(out.ms.astype(float)), "ms"] = np.inf
+    out["experiment"] = out.experiment.astype(str)
     # Experiments 4-6 ran the essay's capacity 5 (the default): name that line plainly. The
     # capacity sweep (experiment 2) keeps its parameter.
-    swept = out.experiment.astype(str) == "2"
+    swept = out.experiment == "2"
     out.loc[~swept, "label"] = out.loc[~swept, "label"].str.replace(r"\(capacity=5\)", "", regex=True)
     return out
 
@@ -92,18 +65,21 @@ def at(s: pd.DataFrame, experiment: str, label: str, **eq) -> float:
 
 def _lines(ax, data: pd.DataFrame, x: str, labels: list[str] | None = None, style: str = "-o") -> None:
     """Median per point, with the interquartile range over frames and repeats as a band."""
-    for label in labels or sorted(data.label.unique()):
+    labels = labels or sorted(data.label.unique())
+    palette = colours(labels)
+    for label in labels:
         d = data[data.label == label].sort_values(x)
         d = d[np.isfinite(d.ms)]
         if len(d):
-            line, = ax.plot(d[x], d.ms, style, ms=3, lw=1.2, label=label, color=COLOURS.get(label))
+            line, = ax.plot(d[x], d.ms, style, ms=3, lw=1.2, label=label, color=palette[label])
             ax.fill_between(d[x], d.q25_ms, d.q75_ms, color=line.get_color(), alpha=0.15, lw=0)
 
 
 def _essay_lines(ax, raw: pd.DataFrame, x: str) -> None:
+    palette = colours(sorted(raw.label.unique()))
     for label, d in raw.groupby("label"):
         d = d.sort_values(x)
-        ax.plot(d[x], d.ms, "--", lw=1, color=COLOURS.get(label), alpha=0.7, label=f"{label} (essay, published)")
+        ax.plot(d[x], d.ms, "--", lw=1, color=palette[label], alpha=0.7, label=f"{label} (essay, published)")
 
 
 def _finish(ax, title: str, xlabel: str, log_x: bool = True) -> None:
@@ -117,10 +93,7 @@ def _finish(ax, title: str, xlabel: str, log_x: bool = True) -> None:
 
 
 def _save(fig, path: Path) -> str:
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path.name
+    return save(fig, path).name
 
 
 def figures(s: pd.DataFrame, raw: pd.DataFrame, best_p: dict, folder: Path) -> dict[str, str]:
@@ -133,7 +106,8 @@ def figures(s: pd.DataFrame, raw: pd.DataFrame, best_p: dict, folder: Path) -> d
         data["capacity"] = data.label.str.extract(r"capacity=(\d+)").astype(float)
         data["stat_p"] = data.label.str.extract(r"p=(\d+)").astype(float)
         data["label"] = data.backend
-        fig, ax = plt.subplots(figsize=(7, 4.5))
+        fig = new_figure(figsize=(7, 4.5))
+        ax = fig.subplots()
         _lines(ax, data, x)
         pub = raw[raw.experiment == int(exp)].rename(columns={"grid_p": "stat_p"})
         _essay_lines(ax, pub, x)
@@ -141,12 +115,14 @@ def figures(s: pd.DataFrame, raw: pd.DataFrame, best_p: dict, folder: Path) -> d
         ax.legend(fontsize=8)
         made[exp] = _save(fig, folder / f"essay_exp{exp}.png")
     if best_p:
-        fig, ax = plt.subplots(figsize=(7, 4.5))
+        fig = new_figure(figsize=(7, 4.5))
+        ax = fig.subplots()
         for backend in ("essay.grid", "own.grid"):
             pts = sorted((int(k.split(":")[0]), v) for k, v in best_p.items() if k.endswith(backend))
-            ax.plot(*zip(*pts), "-o", ms=3, label=f"{backend} (ours)", color=COLOURS[backend])
+            ax.plot(*zip(*pts), "-o", ms=3, label=f"{backend} (ours)", color=colours([backend])[backend])
         pub = raw[raw.experiment == 3].sort_values("n")
-        ax.plot(pub.n, pub.grid_p, "--", color=COLOURS["essay.grid"], label="essay.grid (essay, published)")
+        ax.plot(pub.n, pub.grid_p, "--", color=colours(["essay.grid"])["essay.grid"],
+                label="essay.grid (essay, published)")
         ax.set_xscale("log", base=2)
         ax.set_xlabel("n")
         ax.set_ylabel("best p (local minimum of the frame period)")
@@ -156,7 +132,8 @@ def figures(s: pd.DataFrame, raw: pd.DataFrame, best_p: dict, folder: Path) -> d
         made["3"] = _save(fig, folder / "essay_exp3.png")
     radii = sorted(pick(s, "4").radius_max.unique())
     if radii:
-        fig, axes = plt.subplots(1, len(radii), figsize=(5.2 * len(radii), 5), sharey=True)
+        fig = new_figure(figsize=(5.2 * len(radii), 5))
+        axes = fig.subplots(1, len(radii), sharey=True)
         for ax, r in zip(np.atleast_1d(axes), radii):
             data = pick(s, "4", radius_max=float(r)).copy()
             data["label"] = data.label.str.replace(r"essay\.grid\(p=\d+\)", "essay.grid", regex=True)
@@ -170,7 +147,8 @@ def figures(s: pd.DataFrame, raw: pd.DataFrame, best_p: dict, folder: Path) -> d
         data = pick(s, exp)
         if data.empty:
             continue
-        fig, ax = plt.subplots(figsize=(8.5, 5))
+        fig = new_figure(figsize=(8.5, 5))
+        ax = fig.subplots()
         _lines(ax, data, "n")
         _essay_lines(ax, raw[raw.experiment == int(exp)], "n")
         _finish(ax, TITLES[exp], "n")
@@ -179,7 +157,8 @@ def figures(s: pd.DataFrame, raw: pd.DataFrame, best_p: dict, folder: Path) -> d
     spreads = pick(s, "Q1")
     if not spreads.empty:
         groups = list(spreads.groupby(["radius_min", "radius_max"]))
-        fig, axes = plt.subplots(1, len(groups), figsize=(5.5 * len(groups), 5), sharey=True)
+        fig = new_figure(figsize=(5.5 * len(groups), 5))
+        axes = fig.subplots(1, len(groups), sharey=True)
         for ax, ((lo, hi), data) in zip(np.atleast_1d(axes), groups):
             _lines(ax, data, "n")
             _finish(ax, f"radii log-uniform in [{lo:.2g}, {hi:.3g}]", "n")
@@ -187,7 +166,8 @@ def figures(s: pd.DataFrame, raw: pd.DataFrame, best_p: dict, folder: Path) -> d
         fig.suptitle(TITLES["Q1"], fontsize=10)
         made["Q1"] = _save(fig, folder / "essay_q1.png")
     if not pick(s, "Q2").empty:
-        fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), sharey=True)
+        fig = new_figure(figsize=(11, 4.5))
+        axes = fig.subplots(1, 2, sharey=True)
         for ax, dist in zip(axes, ("gauss_x", "gauss_y")):
             _lines(ax, pick(s, "Q2", dist=dist), "n")
             _finish(ax, f"{dist} (clumped along {dist[-1]})", "n")
@@ -196,11 +176,13 @@ def figures(s: pd.DataFrame, raw: pd.DataFrame, best_p: dict, folder: Path) -> d
         made["Q2"] = _save(fig, folder / "essay_q2.png")
     q3 = pick(s, "Q3")
     if not q3.empty:
-        fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
+        fig = new_figure(figsize=(11, 4.5))
+        axes = fig.subplots(1, 2)
+        palette = colours(sorted(q3.label.unique()))
         for ax, stage in zip(axes, ("update", "pairs")):
             for label, d in q3.groupby("label"):
                 d = d.sort_values("speed")
-                ax.plot(d.speed, d[f"{stage}_ms"], "-o", ms=3, label=label, color=COLOURS.get(label))
+                ax.plot(d.speed, d[f"{stage}_ms"], "-o", ms=3, label=label, color=palette[label])
             ax.set_xscale("log")
             ax.set_yscale("log")
             ax.set_xlabel("speed (px/s; one frame is 1/60 s)")
@@ -215,7 +197,8 @@ def figures(s: pd.DataFrame, raw: pd.DataFrame, best_p: dict, folder: Path) -> d
         d = stacked[(stacked.n == n_max) & np.isfinite(stacked.ms)].copy()
         d["label"] = d.label.str.replace(r"essay\.grid\(p=\d+\)", "essay.grid", regex=True)
         d = d.sort_values("ms")
-        fig, ax = plt.subplots(figsize=(9, 4.8))
+        fig = new_figure(figsize=(9, 4.8))
+        ax = fig.subplots()
         left = np.zeros(len(d))
         for stage, colour in zip(STAGES, ("tab:blue", "tab:orange", "tab:green")):
             ax.barh(d.label, d[f"{stage}_ms"], left=left, color=colour, label=stage)
@@ -477,7 +460,7 @@ def sweep_notes(s: pd.DataFrame, raw: pd.DataFrame) -> dict[str, str]:
 
 
 def write_report(results: Path, report_dir: Path, meta: dict) -> Path:
-    rows = pd.read_csv(results / "results.csv")
+    rows, _ = read_rows(results)
     s = summarise_runs(rows)
     raw = essay_published()
     best_p = meta.get("best_p", {})

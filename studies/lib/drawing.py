@@ -6,14 +6,14 @@ Every drawn layer is one matplotlib collection tagged with a gid ("circles", "ce
 
 from __future__ import annotations
 
-import matplotlib
+import warnings
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.collections import EllipseCollection, LineCollection  # noqa: E402
+import numpy as np
+from matplotlib.collections import EllipseCollection, LineCollection
 
-from engines.pairs import keys  # noqa: E402
+from engines.pairs import keys
+
+from .figures import new_figure as blank_figure
 
 STYLE = {
     "cells": {"colors": "0.75", "linewidths": 0.4},
@@ -106,7 +106,9 @@ def draw_frame(fig, positions: np.ndarray, radii: np.ndarray, structure: dict, c
         strip.set_ylim(-1, max(rows.max(initial=0) + 1, 1))
         strip.set_yticks([])
         strip.set_xlabel(f"intervals along the sweep axis ({'xy'[axis]}), packed into rows", fontsize=8)
-    fig.tight_layout()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        fig.tight_layout()
     return counts
 
 
@@ -124,4 +126,4 @@ def counted(fig) -> dict[str, int]:
 
 
 def new_figure(with_strip: bool = False):
-    return plt.figure(figsize=(8, 9.5 if with_strip else 8))
+    return blank_figure(figsize=(8, 9.5 if with_strip else 8))

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import faulthandler
 import gc
+import hashlib
 import json
 import multiprocessing as mp
 import resource
@@ -22,28 +23,52 @@ from typing import Any, Callable
 import numpy as np
 
 import engines
-from engines.pairs import is_canonical, keys, narrow_phase
+from engines.pairs import is_canonical, keys
+from own.reference import narrow_phase
+from scenes import Scene
 from scenes.motion import Trajectory
-
-COLUMNS = [
-    "backend", "params", "scene", "dist", "n", "radius_min", "radius_max", "seed", "repeat", "frame",
-    "t_update_s", "t_pairs_s", "t_narrow_s", "t_total_s", "candidates", "true_pairs", "missed",
-    "false_positives", "box_pairs", "box_missed", "reports", "t_setup_s", "status", "stats",
-    "tunneled", "peak_rss_mb",
-]
 
 
 @dataclass
 class Job:
-    """One backend with its parameters, run `repeats` times over frames 1.. of the trajectory."""
+    """One backend with its parameters, run `repeats` times over frames 1..`frames` of a scene.
+
+    `budget_s`: a first timed frame of a repeat slower than this stops the job (its rows so far
+    kept). `tag`: the study's own columns for its rows ("experiment", "label"), part of the key.
+    """
 
     backend: str
     params: dict[str, Any] = field(default_factory=dict)
     repeats: int = 1
-    budget_s: float = float("inf")  # a first timed frame slower than this stops the backend
+    budget_s: float = float("inf")
     timeout_s: float = 600.0
     memory_mb: float | None = None  # address space the child may add; None: no limit
     count_tunneling: bool = False  # pairs that met between frames but were never candidates
+    scene: Scene | None = None  # what the runner simulates for this job (run_isolated takes a trajectory)
+    frames: int = 1  # timed frames; the trajectory has one more, the warm-up frame 0
+    tag: dict[str, Any] = field(default_factory=dict)
+
+    def describe(self) -> str:
+        """The backend with the parameters given, e.g. 'own.grid(p=16)'."""
+        given = ", ".join(f"{k}={self.params[k]}" for k in sorted(self.params))
+        return f"{self.backend}({given})" if given else self.backend
+
+    @property
+    def key(self) -> str:
+        """A stable id of what is measured, so a resumed study can tell which jobs are done; it
+        records the frames and repeats planned, so their rows tell whether the job finished."""
+        return json.dumps({"backend": self.backend, "params": {k: self.params[k] for k in sorted(self.params)},
+                           "scene": scene_id(self.scene) if self.scene is not None else None, "frames": self.frames,
+                           "repeats": self.repeats, **{k: self.tag[k] for k in sorted(self.tag)}}, default=str)
+
+
+def scene_id(scene: Scene) -> str:
+    """The scene's name and a digest of its contents (two scenes of one name differ in it)."""
+    digest = hashlib.sha1()
+    for array in (scene.positions, scene.radii, scene.velocities):
+        digest.update(np.ascontiguousarray(array).tobytes())
+    digest.update(repr((scene.box, scene.moves, scene.walls, scene.responds)).encode())
+    return f"{scene.name}#{digest.hexdigest()[:12]}"
 
 
 class InvalidOutput(Exception):
@@ -160,7 +185,9 @@ def _child(job: Job, conn) -> None:
     except InvalidOutput as exc:
         conn.send(("failed", f"invalid output: {exc}"))
     except MemoryError:
-        conn.send(("failed", f"out of memory (budget {job.memory_mb:g} MB)"))
+        budget = (f"budget {job.memory_mb:g} MB" if job.memory_mb is not None
+                  else "no budget set: the machine's memory ran out")
+        conn.send(("failed", f"out of memory ({budget})"))
     except Exception as exc:  # an engine error is a result of the study, not a crash of it
         last = traceback.extract_tb(exc.__traceback__)[-1]
         conn.send(("failed", f"error: {type(exc).__name__}: {exc} (at {last.name})".replace("\n", " ")))
@@ -173,6 +200,7 @@ class Outcome:
     backend: str
     status: str  # "ok", "skipped: ...", "error: ...", "crashed: signal N", "timeout after S s"
     rows: list[dict[str, Any]]
+    resumed: bool = False  # read back from an earlier run's results, not measured now
 
 
 def run_isolated(job: Job, traj: Trajectory, on_rows: Callable[[list[dict]], None] | None = None) -> Outcome:
@@ -187,28 +215,31 @@ def run_isolated(job: Job, traj: Trajectory, on_rows: Callable[[list[dict]], Non
     rows: list[dict] = []
     status = None
     deadline = time.monotonic() + job.timeout_s
-    while status is None:
-        remaining = deadline - time.monotonic()
-        if remaining <= 0:
+    try:
+        while status is None:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                status = f"timeout after {job.timeout_s:g} s"
+                break
+            if not parent.poll(min(remaining, 0.5)):
+                continue
+            try:
+                kind, payload = parent.recv()
+            except EOFError:  # the child is gone without saying it finished
+                proc.join()
+                status = _crash_status(proc.exitcode)
+                break
+            if kind == "rows":
+                rows += payload
+                if on_rows:
+                    on_rows(payload)
+            else:
+                status = "ok" if kind == "done" else payload
+    finally:  # a timeout, or the study stopping (an interrupt, a full disk): the child goes too
+        if status is None or status.startswith("timeout"):
             proc.kill()
-            status = f"timeout after {job.timeout_s:g} s"
-            break
-        if not parent.poll(min(remaining, 0.5)):
-            continue
-        try:
-            kind, payload = parent.recv()
-        except EOFError:  # the child is gone without saying it finished
-            proc.join()
-            status = _crash_status(proc.exitcode)
-            break
-        if kind == "rows":
-            rows += payload
-            if on_rows:
-                on_rows(payload)
-        else:
-            status = "ok" if kind == "done" else payload
-    proc.join(timeout=5)
-    parent.close()
+        proc.join(timeout=5)
+        parent.close()
     return Outcome(job.backend, status, rows)
 
 
@@ -222,5 +253,5 @@ def scene_columns(traj: Trajectory) -> dict[str, Any]:
     """The columns that describe the scene, the same on every row of a run."""
     s = traj.scene
     r_min, r_max = s.radius_range
-    return {"scene": s.name, "dist": s.meta.get("dist", ""), "n": s.n,
-            "radius_min": r_min, "radius_max": r_max, "seed": s.meta.get("seed", "")}
+    return {"scene": s.name, "dist": s.meta.get("dist", ""), "n": s.n, "radius_min": r_min, "radius_max": r_max,
+            "speed": s.meta.get("speed", ""), "seed": s.meta.get("seed", "")}

@@ -8,10 +8,10 @@ detection). The cost: more candidates, and a rebuild every frame since the radii
 
 from __future__ import annotations
 
-from own.common import swept_circles
+from engines.base import BroadPhase
+from engines.registry import backend_class
 
-from .base import BroadPhase
-from .registry import backend_class
+from .common import swept_circles
 
 
 class _Swept(BroadPhase):

@@ -1,0 +1,47 @@
+"""A backend's tunable parameters and the values a sweep tries on a given scene.
+
+Each backend class lists its knobs in `sweeps`, beside the `defaults` they tune. Sizes are swept
+as multiples of a length taken from the scene (a default cell, the mean diameter), so one list of
+factors fits any scene's scale.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+from scenes import Scene
+
+
+@dataclass(frozen=True)
+class Knob:
+    """One parameter of a backend and the values a sweep tries for it on a scene."""
+
+    param: str
+    values: Callable[[Scene], list[Any]]
+    label: str  # axis label of the sweep's figure
+
+
+def mean_diameter(scene: Scene) -> float:
+    """Two mean radii, or the mean spacing of the objects when every radius is zero."""
+    d = 2.0 * float(scene.radii.mean()) if scene.n else 0.0
+    if d > 0:
+        return d
+    span = float(np.ptp(scene.positions, axis=0).max()) if scene.n else 1.0
+    return span / max(np.sqrt(scene.n), 1.0) or 1.0
+
+
+def sizes(length: Callable[[Scene], float], factors: tuple[float, ...]) -> Callable[[Scene], list[float]]:
+    """Multiples of a length measured on the scene, rounded to 6 significant digits."""
+    return lambda scene: [float(f"{f * length(scene):.6g}") for f in factors]
+
+
+def fixed(values: list[Any]) -> Callable[[Scene], list[Any]]:
+    """The same values on every scene."""
+    return lambda scene: list(values)
+
+
+# Cell sizes of hashes and grids, as multiples of the mean diameter.
+HASH_CELL_FACTORS = (0.5, 1.0, 2.0, 3.0, 4.0, 6.0)

@@ -1,0 +1,49 @@
+"""Ground truth for a frame: the exact box-overlap pairs, the truly overlapping circles, and the
+shared exact narrow phase that every backend's candidates go through."""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from engines.base import PairArray
+
+# Above this many objects brute force is too slow; the exact grid (tested equal to brute
+# force on random and adversarial scenes) takes over.
+BRUTE_FORCE_LIMIT = 3000
+
+
+def box_pairs(positions: np.ndarray, radii: np.ndarray) -> PairArray:
+    """Every pair whose boxes overlap (closed intervals), sorted by (i, j)."""
+    if len(positions) <= BRUTE_FORCE_LIMIT:
+        from .brute import brute_pairs
+
+        return brute_pairs(positions, radii)
+    from .grid import UniformGrid
+
+    grid = UniformGrid()
+    grid.reset(positions, radii)
+    found = grid.pairs()
+    return found[np.lexsort((found[:, 1], found[:, 0]))]
+
+
+def circle_pairs(positions: np.ndarray, radii: np.ndarray) -> PairArray:
+    """Every pair of circles that overlap or touch, sorted by (i, j)."""
+    return narrow_phase(positions, radii, box_pairs(positions, radii))
+
+
+@nb.njit(cache=True)
+def narrow_phase(positions: np.ndarray, radii: np.ndarray, pairs: np.ndarray) -> PairArray:
+    """The exact narrow phase shared by every backend: the candidate pairs whose circles truly
+    overlap, distance <= r_i + r_j (touching counts). The rows are gathered in the same pass as
+    the test: numpy's boolean indexing of them cost twice the test itself at n = 2048."""
+    out = np.empty((pairs.shape[0], 2), dtype=pairs.dtype)
+    count = 0
+    for k in range(pairs.shape[0]):
+        i, j = pairs[k, 0], pairs[k, 1]
+        dx = positions[j, 0] - positions[i, 0]
+        dy = positions[j, 1] - positions[i, 1]
+        reach = radii[i] + radii[j]
+        out[count, 0], out[count, 1] = i, j  # kept only if the circles overlap (branch-free)
+        count += dx * dx + dy * dy <= reach * reach
+    return out[:count]

@@ -1,0 +1,146 @@
+"""A study's output folder: created, locked against a second run, and its meta.json.
+
+The lock is a POSIX record lock on `DIR/.lock`, which the kernel releases when the process ends,
+however it ends (a SIGKILL too), and which the forked children that run the backends do not
+inherit: a second run into the same folder is refused in one line naming the first, instead of
+both writing into one file. meta.json holds what a result needs to be read
+later (versions, machine, command, date) and the run's duration, which a resumed run adds to.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import fcntl
+import json
+import os
+import platform
+import tempfile
+import time
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from engines.registry import FAMILIES
+
+from . import cli
+from .cli import CliError
+
+# The versions a result depends on: the numerical stack and every engine binding.
+CORE_PACKAGES = ["numpy", "numba", "scipy", "pandas", "matplotlib"]
+
+
+def packages() -> list[str]:
+    return CORE_PACKAGES + [f.package for f in FAMILIES.values() if f.package and f.package not in CORE_PACKAGES]
+
+
+def docs_folder() -> Path:
+    """The repository's docs/ (where full runs write their reports), or ./docs outside a checkout."""
+    root = Path(__file__).resolve().parents[2]
+    return root / "docs" if (root / "pyproject.toml").exists() else Path("docs")
+
+
+def cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def machine() -> dict[str, Any]:
+    return {"cpu": cpu_model(), "cores": os.cpu_count(), "platform": platform.platform(), "host": platform.node()}
+
+
+def versions() -> dict[str, str | None]:
+    found: dict[str, str | None] = {"python": platform.python_version()}
+    for name in packages():
+        try:
+            found[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            found[name] = None
+    return found
+
+
+def read_meta(folder: Path) -> dict[str, Any]:
+    """The meta.json of an earlier run in `folder` ({} when there is none, or it is unreadable)."""
+    path = Path(folder) / "meta.json"
+    try:
+        return json.loads(path.read_text()) if path.exists() else {}
+    except (OSError, ValueError):
+        return {}
+
+
+def write_json(path: Path, data: dict[str, Any]) -> None:
+    """Write through a temporary file and rename, so a reader never sees half a file."""
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(data, indent=2, default=str) + "\n")
+    os.replace(tmp, path)
+
+
+class Output:
+    """The folder of one study run, locked while the run lasts.
+
+    `meta(**fields)` rewrites meta.json with the fields given so far; `elapsed_s` counts this run
+    and, with `resume`, the runs it continues.
+    """
+
+    def __init__(self, path: str | None, study: str, command: str, resume: bool = False) -> None:
+        self.path = Path(path) if path else Path("results") / f"{study}-{dt.datetime.now():%Y%m%d-%H%M%S}"
+        try:
+            self.path.mkdir(parents=True, exist_ok=True)
+            with tempfile.NamedTemporaryFile(dir=self.path):
+                pass
+        except OSError as exc:
+            raise CliError(f"cannot write to output folder {self.path}: {exc.strerror or exc}") from None
+        self._lock = self._take_lock(command)
+        cli.interrupted_hint = f"the rows so far are in {self.path}: continue with --resume --out {self.path}"
+        earlier = read_meta(self.path) if resume else {}
+        self._before_s = float(earlier.get("elapsed_s", 0.0))
+        self._start = time.monotonic()
+        self._fields: dict[str, Any] = {
+            "date": dt.datetime.now().astimezone().isoformat(timespec="seconds"), "command": command,
+            "machine": machine(), "versions": versions(),
+        }
+        if earlier:
+            self._fields["resumed_from"] = earlier.get("date")
+
+    def _take_lock(self, command: str):
+        lock = open(self.path / ".lock", "a+")
+        try:
+            fcntl.lockf(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            lock.seek(0)
+            holder = lock.read().strip() or "another process"
+            lock.close()
+            raise CliError(f"{self.path} is in use by another run ({holder}); wait for it to finish or "
+                           "choose another --out") from None
+        lock.seek(0)
+        lock.truncate()
+        lock.write(f"pid {os.getpid()}: {command}\n")
+        lock.flush()
+        return lock
+
+    @property
+    def elapsed_s(self) -> float:
+        return self._before_s + time.monotonic() - self._start
+
+    def meta(self, **fields: Any) -> dict[str, Any]:
+        """Record these fields in meta.json (with the ones given before) and return the whole."""
+        self._fields.update(fields)
+        data = {**self._fields, "elapsed_s": round(self.elapsed_s, 1), "minutes": round(self.elapsed_s / 60, 1)}
+        write_json(self.path / "meta.json", data)
+        return data
+
+    def close(self) -> None:
+        if self._lock is not None:
+            self._lock.close()  # releases the lock
+            self._lock = None
+        cli.interrupted_hint = ""
+
+    def __enter__(self) -> "Output":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

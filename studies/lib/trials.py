@@ -1,0 +1,79 @@
+"""Short measured trials of one backend with given parameters, shared by tune and recommend.
+
+A trial is one job (the backend isolated in a child process over a stepped scene) reduced to what
+a choice needs: the median time per frame end to end (update + pairs + the shared narrow phase,
+since extra candidates cost narrow-phase time), the spread over repeats, and whether it missed
+any pair.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+import engines
+from scenes import Scene
+
+from .harness import Job, Outcome
+from .results import missed_total, summarise
+from .runner import Runner
+
+
+@dataclass
+class Trial:
+    backend: str
+    params: dict[str, Any]
+    status: str  # "ok" or why it did not finish
+    median_ms: float = float("nan")  # over every timed frame of every repeat
+    low_ms: float = float("nan")  # spread: the fastest and slowest repeat's median
+    high_ms: float = float("nan")
+    missed: int = 0  # truly overlapping pairs, plus overlapping boxes for "boxes" backends
+    described: str = ""  # the backend with its parameters, e.g. "own.grid(cell=20.0, p=None)"
+    last_stats: str = "{}"  # the backend's work counters on the last frame (JSON)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok" and np.isfinite(self.median_ms)
+
+    def overlaps(self, other: "Trial") -> bool:
+        """Whether the two spreads overlap: the difference is within run-to-run noise."""
+        return self.low_ms <= other.high_ms and other.low_ms <= self.high_ms
+
+    @classmethod
+    def of(cls, job: Job, outcome: Outcome) -> "Trial":
+        """The job's outcome reduced by the shared summary."""
+        ok = [r for r in outcome.rows if r["status"] == "ok"]
+        trial = cls(job.backend, dict(job.params), outcome.status if ok or outcome.status != "ok" else "no frames")
+        if not ok:
+            return trial
+        line = summarise(pd.DataFrame(ok).assign(backend=job.backend), ["backend"]).iloc[0]
+        trial.median_ms, trial.low_ms, trial.high_ms = line.total_ms, line.low_ms, line.high_ms
+        trial.missed = int(missed_total(line.to_frame().T).iloc[0])
+        trial.described, trial.last_stats = line.params, ok[-1]["stats"]
+        return trial
+
+
+def run_trial(runner: Runner, scene: Scene, backend: str, params: dict[str, Any] | None = None, *, frames: int,
+              repeats: int = 3, budget_s: float = float("inf"), timeout_s: float = 120.0,
+              tag: dict[str, Any] | None = None) -> Trial:
+    """Measure `backend(**params)` on frames 1..`frames` of `scene`, `repeats` times."""
+    job = Job(backend, dict(params or {}), repeats=repeats, budget_s=budget_s, timeout_s=timeout_s, scene=scene,
+              frames=frames, tag=tag or {})
+    return Trial.of(job, runner.run(job))
+
+
+def warm_up(backend: str) -> None:
+    """Compile our numba backends once in this process, so forked trials inherit the machine code
+    instead of each loading it from the cache. Engines are not touched here: one that crashes
+    must crash in a child, not in the study."""
+    if not engines.of_kind(backend, "own"):
+        return
+    rng = np.random.default_rng(0)
+    b = engines.create(backend)
+    b.reset(rng.uniform(0, 100, (64, 2)), rng.uniform(1, 5, 64))
+    b.update(rng.uniform(0, 100, (64, 2)))
+    b.pairs()
+    b.close()
