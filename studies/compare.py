@@ -98,10 +98,11 @@ def report(folder: Path, check: bool) -> int:
     headline = ours_against_engines(table) if not table.empty else None
     if headline:
         print(headline)
-    print("times: median ±interquartile range over all timed frames and repeats; cand/true: candidates per truly "
-          "overlapping pair (1 = no extra work);\nmissed: truly overlapping pairs (and, for 'boxes' backends, "
-          "overlapping boxes) absent from the candidates, summed over frames;\nsetup: first build and "
-          "warm-up frame (JIT compilation, engine world creation) of the slowest repeat, not in the timed frames.")
+    print("times: median ±interquartile range over all timed frames and repeats; engine bp: the engine's own measure "
+          "of its broad phase (ms), where it reports one;\ncand/true: candidates per truly overlapping pair (1 = no "
+          "extra work); missed: truly overlapping pairs (and, for 'boxes' backends,\noverlapping boxes) absent from the "
+          "candidates, summed over frames; setup: first build and warm-up frame (JIT compilation, engine world "
+          "creation)\nof the slowest repeat, not in the timed frames.")
     for name, status in summary.loc[summary.status != "ok", "status"].items():
         print(f"  {name}: {status}")
     unavailable = meta.get("unavailable", {})

@@ -234,11 +234,16 @@ def test_crash_in_a_real_engine_does_not_stop_the_study(tmp_path):
 
 
 def test_headline_sets_our_fastest_against_the_fastest_engine():
+    nan = float("nan")
     table = pd.DataFrame({"update_ms": [0.03, 0.05, 0.4, 0.1, 2.0], "pairs_ms": [0.04, 0.1, 1.0, 0.5, 3.0],
-                          "total_ms": [0.1, 0.2, 1.5, 0.7, 5.2]},
+                          "total_ms": [0.1, 0.2, 1.5, 0.7, 5.2], "engine_broadphase_ms": [nan, nan, 0.35, nan, 1.4]},
                          index=["own.grid", "own.sap", "chipmunk.bbtree", "scipy.kdtree", "bullet.dbvt"])
-    line = ours_against_engines(table)
+    line, own_timer = ours_against_engines(table).splitlines()
     # scipy's k-d tree is faster than every engine but is not one.
     assert "own.grid (0.100 ms per frame)" in line and "chipmunk.bbtree (1.500 ms)" in line
     assert "15.0x end to end, 20.0x on update + pairs" in line
+    # Against the engines' own timers: the fastest by its own timer, set against our quickest broad phase.
+    assert "chipmunk.bbtree reports 0.350 ms per frame, our own.grid takes 0.070 ms on update + pairs: 5.0x" in own_timer
+    untimed = table.assign(engine_broadphase_ms=nan)
+    assert ours_against_engines(untimed).splitlines()[1] == "no engine that ran reports its own broad-phase time"
     assert ours_against_engines(table.drop(["chipmunk.bbtree", "bullet.dbvt"])) is None

@@ -7,7 +7,9 @@ i < j in every row, no pair twice. What a backend promises about those pairs is 
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, Literal
 
 import numpy as np
@@ -28,6 +30,38 @@ EMPTY_PAIRS: PairArray = np.empty((0, 2), dtype=np.int64)
 Reports = Literal["boxes", "contacts"]
 
 
+@dataclass(frozen=True)
+class Limits:
+    """The input an engine survives; the rest is refused at the interface with a ValueError that
+    names the limit, instead of a crash, a hang or silently missed pairs. `why` says what in the
+    engine sets the limit (shown in the error). The defaults admit any valid input."""
+
+    coordinate: float = math.inf  # largest |x| or |y| of a centre
+    radius: float = math.inf  # largest radius
+    zero_radius: bool = True  # whether radius 0 is admitted
+    objects: int | None = None  # most objects
+    why: str = ""
+
+    def problem(self, positions: np.ndarray, radii: np.ndarray | None = None) -> str | None:
+        """What in this input lies beyond the limits, or None."""
+        n = len(positions)
+        if self.objects is not None and n > self.objects:
+            return f"{n} objects, over its limit of {self.objects}"
+        if n and self.coordinate < math.inf:
+            reach = float(np.abs(positions).max())
+            if reach > self.coordinate:
+                return f"coordinates up to {reach:.3g}, beyond its limit of {self.coordinate:.3g}"
+        if radii is not None and len(radii):
+            if not self.zero_radius and radii.min() == 0.0:
+                return f"radius 0 (object {int(radii.argmin())}), which it cannot create"
+            if radii.max() > self.radius:
+                return f"radius {radii.max():.3g} (object {int(radii.argmax())}), over its limit of {self.radius:.3g}"
+        return None
+
+
+NO_LIMITS = Limits()
+
+
 class BroadPhase(ABC):
     """Base class: subclasses implement `_reset`, `_update` and `_pairs` on validated arrays.
 
@@ -35,8 +69,9 @@ class BroadPhase(ABC):
     the registry), `reports` (see above), `exact` (True when the pairs are exactly the box
     overlaps, no extra candidates), `defaults`, the parameters with their defaults (unknown
     parameters are an error), `sweeps`, the values a tuning sweep tries for some of them, `method`,
-    the kind of structure ("grid", "hash", "sweep", "tree", "kdtree", "brute"), and `breaks`, what
-    the evidence tests established about the inputs it mishandles (empty when none).
+    the kind of structure ("grid", "hash", "sweep", "tree", "kdtree", "brute"), `breaks`, what
+    the evidence tests established about the inputs it mishandles (empty when none), and `limits`,
+    the input it survives (the rest is refused with a ValueError).
     """
 
     name: ClassVar[str] = ""
@@ -46,6 +81,7 @@ class BroadPhase(ABC):
     sweeps: ClassVar[tuple["Knob", ...]] = ()
     method: ClassVar[str] = ""
     breaks: ClassVar[str] = ""
+    limits: ClassVar[Limits] = NO_LIMITS
 
     def __init__(self, **params: Any) -> None:
         unknown = sorted(set(params) - set(self.defaults))
@@ -60,13 +96,23 @@ class BroadPhase(ABC):
     def reset(self, positions: npt.ArrayLike, radii: npt.ArrayLike) -> None:
         """Build from scratch for these objects (positions (n, 2), radii (n,))."""
         pos = check_positions(positions)
-        self.radii = check_radii(radii, pos.shape[0])
-        self.n = pos.shape[0]
+        radii = check_radii(radii, pos.shape[0])
+        self._check_limits(pos, radii)
+        self.radii, self.n = radii, pos.shape[0]
         self._reset(pos, self.radii)
 
     def update(self, positions: npt.ArrayLike) -> None:
         """The same objects (same radii, same order) moved to `positions`."""
-        self._update(check_positions(positions, self.n))
+        pos = check_positions(positions, self.n)
+        self._check_limits(pos)
+        self._update(pos)
+
+    def _check_limits(self, positions: np.ndarray, radii: np.ndarray | None = None) -> None:
+        if self.limits is NO_LIMITS:  # our own backends: no cost per frame
+            return
+        problem = self.limits.problem(positions, radii)
+        if problem:
+            raise ValueError(f"{self.name}: {problem}" + (f" ({self.limits.why})" if self.limits.why else ""))
 
     def pairs(self) -> PairArray:
         """Candidate pairs for the current positions: (m, 2) int64, i < j, unique."""
@@ -82,6 +128,12 @@ class BroadPhase(ABC):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
             raise ValueError(f"{self.name}: {key} must be an integer >= {minimum}, got {value!r}")
         return int(value)
+
+    def engine_broadphase_s(self) -> float | None:
+        """The engine's own measure of its broad phase in the last frame, in seconds, where the
+        engine reports one (its profiler, its timer, or the index call itself); None where it has
+        none. Our own backends leave it None: their update + pairs is all broad phase."""
+        return None
 
     def validate(self) -> None:
         """Check the structure's invariants; raises AssertionError when one is broken."""

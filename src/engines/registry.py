@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import fnmatch
 import importlib
+import re
 from dataclasses import dataclass
 from functools import cache
 from typing import Any, Literal
@@ -26,40 +27,46 @@ class Family:
 
     `kind`: "own" (our compiled code), "essay" (the essay's Python methods), "engine" (a physics
     engine's broad phase: what our backends are set against) or "library" (a general-purpose
-    library). `requirement` is the pinned distribution as pyproject.toml lists it, `extra` the
-    optional extra that installs it when it is not an ordinary dependency.
+    library). `requirements` are the pinned distributions as pyproject.toml lists them, `extra`
+    the optional extra that installs them when they are too large to be ordinary dependencies.
     """
 
     name: str
     kind: Kind
     title: str
     colour: str  # one matplotlib colour per family, the same in every figure
-    requirement: str = ""
+    requirements: tuple[str, ...] = ()
     extra: str = ""
 
     @property
-    def package(self) -> str:
-        """The distribution's name ("pymunk"), or "" for the project's own code."""
-        return self.requirement.split("=")[0].split(">")[0].split("<")[0].strip()
+    def packages(self) -> list[str]:
+        """The distributions' names ("pymunk"); none for the project's own code."""
+        return [re.split(r"[=<>!~\[ ]", r, maxsplit=1)[0] for r in self.requirements]
 
     @property
     def install(self) -> str:
-        """The command that installs this family's package."""
-        if not self.requirement:
+        """The command that installs this family's packages."""
+        if not self.requirements:
             return "part of this project"
         if self.extra:
             return f'pip install -e ".[{self.extra}]"'
-        return f'pip install "{self.requirement}"'
+        return "pip install " + " ".join(f'"{r}"' for r in self.requirements)
 
 
 FAMILIES: dict[str, Family] = {f.name: f for f in [
     Family("own", "own", "our compiled broad phases (numba)", "tab:blue"),
     Family("essay", "essay", "the essay's methods in pure Python", "tab:orange"),
-    Family("chipmunk", "engine", "Chipmunk2D through pymunk", "tab:green", "pymunk==7.3.1"),
-    Family("bullet", "engine", "Bullet through pybullet", "tab:purple", "pybullet==3.2.7"),
-    Family("fcl", "engine", "FCL through python-fcl", "tab:brown", "python-fcl==0.7.0.11"),
-    Family("coal", "engine", "coal, the maintained FCL fork", "tab:pink", "coal==3.0.3"),
-    Family("scipy", "library", "scipy's k-d tree", "tab:olive", "scipy>=1.11"),
+    Family("chipmunk", "engine", "Chipmunk2D through pymunk", "tab:green", ("pymunk==7.3.1",)),
+    Family("bullet", "engine", "Bullet through pybullet", "tab:purple", ("pybullet==3.2.7",)),
+    Family("fcl", "engine", "FCL through python-fcl", "tab:brown", ("python-fcl==0.7.0.11",)),
+    Family("coal", "engine", "coal, the maintained FCL fork", "tab:pink", ("coal==3.0.3",)),
+    Family("physx", "engine", "NVIDIA PhysX 5 through ovphysx", "tab:red",
+           ("ovphysx==0.7.0.74035321", "physx-usd-schemas==25.11.2.72696984"), "physx"),
+    Family("box2d", "engine", "Box2D 2.3 (box2d) and 3.1 (pyb2d3)", "tab:cyan", ("box2d==2.3.10", "pyb2d3==0.11.1")),
+    Family("rapier", "engine", "Rapier through rapier3d", "darkgoldenrod", ("rapier3d==0.36.1",)),
+    Family("mujoco", "engine", "MuJoCo", "slategray", ("mujoco==4.0.0",)),
+    Family("warp", "library", "NVIDIA Warp's hash grid", "yellowgreen", ("warp-lang==1.19.0",), "warp"),
+    Family("scipy", "library", "scipy's k-d tree", "tab:olive", ("scipy>=1.11",)),
 ]}
 
 # name -> "module:Class". Engine adapters import their binding at module level, so an import
@@ -80,6 +87,9 @@ BACKENDS: dict[str, str] = {
     "essay.quadtree": "own.essay.quadtree:EssayQuadtree",
     "chipmunk.bbtree": "engines.chipmunk:ChipmunkTree",
     "chipmunk.hash": "engines.chipmunk:ChipmunkHash",
+    "chipmunk.sweep1d": "engines.chipmunk_index:ChipmunkSweep1D",
+    "chipmunk.bbtree_index": "engines.chipmunk_index:ChipmunkTreeIndex",
+    "chipmunk.hash_index": "engines.chipmunk_index:ChipmunkHashIndex",
     "bullet.dbvt": "engines.bullet:BulletDbvt",
     "bullet.simple": "engines.bullet:BulletSimple",
     "fcl.tree": "engines.fcl_tree:FclTree",
@@ -90,6 +100,14 @@ BACKENDS: dict[str, str] = {
     "coal.tree": "engines.coal_managers:CoalTree",
     "coal.tree_array": "engines.coal_managers:CoalTreeArray",
     "coal.hash": "engines.coal_managers:CoalHash",
+    "physx.sap": "engines.physx:PhysXSap",
+    "physx.mbp": "engines.physx:PhysXMbp",
+    "physx.pabp": "engines.physx:PhysXPabp",
+    "box2d.v2": "engines.box2d:Box2DV2",
+    "box2d.v3": "engines.box2d:Box2DV3",
+    "rapier.bvh": "engines.rapier:RapierBvh",
+    "mujoco.sap": "engines.mujoco_collision:MujocoSap",
+    "warp.hashgrid": "engines.warp_grid:WarpHashGrid",
     "scipy.kdtree": "engines.scipy_kdtree:KDTree",
 }
 

@@ -135,6 +135,7 @@ def measure(job: Job, traj: Trajectory, repeat: int) -> list[dict[str, Any]]:
                 rows.append({
                     "repeat": repeat, "frame": f, "t_update_s": t1 - t0, "t_pairs_s": t2 - t1,
                     "t_narrow_s": t4 - t3, "t_total_s": (t2 - t0) + (t4 - t3), "t_setup_s": setup,
+                    "t_engine_broadphase_s": backend.engine_broadphase_s(),
                     "reports": backend.reports, "params": backend.describe(), "status": "ok",
                     "stats": json.dumps(backend.stats(), default=float),
                     **_count(f, traj, got, backend.reports),

@@ -30,7 +30,7 @@ CORE_PACKAGES = ["numpy", "numba", "scipy", "pandas", "matplotlib"]
 
 
 def packages() -> list[str]:
-    return CORE_PACKAGES + [f.package for f in FAMILIES.values() if f.package and f.package not in CORE_PACKAGES]
+    return CORE_PACKAGES + [p for f in FAMILIES.values() for p in f.packages if p not in CORE_PACKAGES]
 
 
 def docs_folder() -> Path:

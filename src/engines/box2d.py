@@ -1,0 +1,127 @@
+"""Box2D's broad phase, version 2.3 (the `box2d` package) and version 3.1 (`pyb2d3`).
+
+Both keep one dynamic AABB tree of fat boxes. Version 2.3 (`box2d.v2`): one dynamic body per
+circle with a sensor fixture, gravity 0, no sleeping; positions are set body by body (its binding
+has no batch setter), then `Step` runs the broad phase (new pairs of fat boxes) and the contact
+update; `world.contacts` is then the set of pairs whose fat boxes overlap: its broad phase's
+output, reported as "boxes". Version 3.1 (`box2d.v3`): bodies moved in one batch call
+(`Bodies.set_transforms`), and the pairs kept from the contact begin and end touch events of
+each step: narrow-phase contacts, reported as "contacts" (sensors in v3 do not see each other).
+Box2D keeps positions in float32.
+"""
+
+from __future__ import annotations
+
+import Box2D
+import numpy as np
+import pyb2d3
+
+from .base import EMPTY_PAIRS, BroadPhase, Limits
+from .pairs import canonical
+
+FRAME_DT = 1.0 / 60.0
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+class Box2DV2(BroadPhase):
+    """Box2D 2.3's dynamic tree: fat boxes (0.1 units of margin, stretched along the motion) and
+    the pairs of overlapping fat boxes kept as contacts between steps."""
+
+    name, method = "box2d.v2", "tree"
+    exact = False
+    reports = "boxes"
+    limits = Limits(coordinate=FLOAT32_MAX, radius=FLOAT32_MAX, why="Box2D 2.3's binding converts every value to "
+                    "float32 and raises on one beyond its range")
+
+    def _reset(self, positions, radii):
+        self._world = Box2D.b2World(gravity=(0.0, 0.0), doSleep=False)
+        self._bodies = []
+        for i, ((x, y), r) in enumerate(zip(positions.tolist(), radii.tolist())):
+            body = self._world.CreateDynamicBody(position=(x, y))
+            body.CreateCircleFixture(radius=r, isSensor=True, density=1.0).userData = i
+            self._bodies.append(body)
+
+    def _update(self, positions):
+        for body, xy in zip(self._bodies, positions.tolist()):
+            body.position = xy
+
+    def _pairs(self):
+        self._world.Step(FRAME_DT, 1, 1)
+        contacts = self._world.contacts
+        if not contacts:
+            return EMPTY_PAIRS.copy()
+        a = np.fromiter((c.fixtureA.userData for c in contacts), dtype=np.int64, count=len(contacts))
+        b = np.fromiter((c.fixtureB.userData for c in contacts), dtype=np.int64, count=len(contacts))
+        self._stats = {"contacts": len(contacts)}
+        return canonical(a, b)
+
+    def close(self):
+        self._bodies, self._world = [], None
+
+
+class Box2DV3(BroadPhase):
+    """Box2D 3.1's dynamic tree, driven through batch calls; the pairs are its touching contacts."""
+
+    name, method = "box2d.v3", "tree"
+    exact = False
+    reports = "contacts"
+
+    def _reset(self, positions, radii):
+        self._world = pyb2d3.World(gravity=(0.0, 0.0))
+        self._bodies = pyb2d3.Bodies()
+        shape = pyb2d3.ShapeDef()
+        shape.enable_contact_events = True
+        for i, ((x, y), r) in enumerate(zip(positions.tolist(), radii.tolist())):
+            body = self._world.create_dynamic_body(position=(x, y))
+            circle = pyb2d3.Circle()
+            circle.radius = r
+            body.create_circle_shape(shape, circle).user_data = i
+            self._bodies.append(body.id)
+        self._transforms = np.zeros((self.n, 4), np.float32)
+        self._transforms[:, 2] = 1.0  # cos of the angle: no rotation
+        self._still = np.zeros((self.n, 2), np.float32)
+        # The touching pairs as keys i * n + j, each at one slot of an array (removal moves the
+        # last key into the freed slot), so that pairs() needs no loop over the pairs.
+        self._keys = np.empty(max(16, self.n), np.int64)
+        self._slot: dict[int, int] = {}
+
+    def _update(self, positions):
+        self._transforms[:, :2] = positions
+        self._bodies.set_transforms(self._transforms)
+        self._bodies.set_linear_velocities(self._still)  # the solver pushed last frame's contacts apart
+
+    def _pairs(self):
+        self._world.step(FRAME_DT, 1)
+        events = self._world.get_contact_events()
+        n = self.n
+        for event in events.end_events():
+            a, b = event.shape_a.user_data, event.shape_b.user_data
+            self._remove(min(a, b) * n + max(a, b))
+        for event in events.begin_events():
+            a, b = event.shape_a.user_data, event.shape_b.user_data
+            self._add(min(a, b) * n + max(a, b))
+        keys = self._keys[:len(self._slot)]
+        return np.column_stack([keys // n, keys % n]) if len(keys) else EMPTY_PAIRS.copy()
+
+    def _add(self, key: int) -> None:
+        if key in self._slot:
+            return
+        if len(self._slot) == len(self._keys):
+            self._keys = np.concatenate([self._keys, np.empty_like(self._keys)])
+        self._slot[key] = len(self._slot)
+        self._keys[self._slot[key]] = key
+
+    def _remove(self, key: int) -> None:
+        at = self._slot.pop(key, None)
+        if at is None:
+            return
+        last = len(self._slot)
+        if at != last:
+            moved = int(self._keys[last])
+            self._keys[at], self._slot[moved] = moved, at
+
+    def close(self):
+        world = getattr(self, "_world", None)
+        if world is not None:
+            world.destroy()
+            self._world = None

@@ -1,0 +1,231 @@
+"""Chipmunk2D's three spatial indexes driven directly, without a Space: Sweep1D, the bounding-box
+tree and the spatial hash, each exactly the broad phase Chipmunk runs inside `cpSpaceStep`.
+
+pymunk's compiled library exports `cpSweep1DNew`, `cpBBTreeNew` and `cpSpaceHashNew`; the same
+shared object is opened here with cffi's ABI mode and each index is driven through its class
+table (`klass->insert`, `klass->reindexQuery`), as Chipmunk's own inline helpers do. The index
+asks a callback for each object's box and hands each candidate pair to another callback: both
+are compiled with numba (`cfunc`), so no Python runs inside a frame. Each object is a record of
+six doubles (box l, b, r, t and velocity) in one array whose address never changes; the pointer
+to a record is the object Chipmunk stores, and its offset in the array is the object's index.
+
+The candidates are the index's raw output, not filtered: Sweep1D sweeps x only (every pair whose
+x intervals overlap, strictly: boxes that only touch along x are not reported); the hash reports
+every pair that shares a cell (no box test); the tree reports pairs of fat boxes (10% of each
+box, plus a velocity term, as in a Space). `pairs()` times the index's own `reindexQuery` call:
+that is the engine's broad-phase time, apart from the Python that calls it.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import cffi
+import numba as nb
+import numpy as np
+import pymunk._chipmunk
+from numba import types
+
+from .base import BroadPhase
+from .knobs import HASH_CELL_FACTORS, Knob, mean_diameter, sizes
+
+CDEF = """
+typedef double cpFloat;
+typedef uintptr_t cpHashValue;
+typedef uint32_t cpCollisionID;
+typedef struct cpBB { cpFloat l, b, r, t; } cpBB;
+typedef cpBB (*cpSpatialIndexBBFunc)(void *obj);
+typedef cpCollisionID (*cpSpatialIndexQueryFunc)(void *obj1, void *obj2, cpCollisionID id, void *data);
+typedef struct cpSpatialIndexClass cpSpatialIndexClass;
+typedef struct cpSpatialIndex {
+    cpSpatialIndexClass *klass;
+    cpSpatialIndexBBFunc bbfunc;
+    struct cpSpatialIndex *staticIndex, *dynamicIndex;
+} cpSpatialIndex;
+struct cpSpatialIndexClass {
+    void (*destroy)(cpSpatialIndex *index);
+    int (*count)(cpSpatialIndex *index);
+    void *each;
+    int (*contains)(cpSpatialIndex *index, void *obj, cpHashValue hashid);
+    void (*insert)(cpSpatialIndex *index, void *obj, cpHashValue hashid);
+    void (*remove)(cpSpatialIndex *index, void *obj, cpHashValue hashid);
+    void (*reindex)(cpSpatialIndex *index);
+    void (*reindexObject)(cpSpatialIndex *index, void *obj, cpHashValue hashid);
+    void (*reindexQuery)(cpSpatialIndex *index, cpSpatialIndexQueryFunc func, void *data);
+    void *query;
+    void *segmentQuery;
+};
+cpSpatialIndex *cpSweep1DNew(cpSpatialIndexBBFunc bbfunc, cpSpatialIndex *staticIndex);
+cpSpatialIndex *cpBBTreeNew(cpSpatialIndexBBFunc bbfunc, cpSpatialIndex *staticIndex);
+cpSpatialIndex *cpSpaceHashNew(cpFloat celldim, int cells, cpSpatialIndexBBFunc bbfunc, cpSpatialIndex *staticIndex);
+void cpBBTreeSetVelocityFunc(cpSpatialIndex *index, void *func);
+void cpSpatialIndexFree(cpSpatialIndex *index);
+"""
+ffi = cffi.FFI()
+ffi.cdef(CDEF)
+lib = ffi.dlopen(str(Path(pymunk._chipmunk.__file__)))
+
+RECORD = 6  # doubles per object: l, b, r, t, vx, vy
+RECORD_BYTES = RECORD * 8
+HEADER = 3  # the pair buffer starts with: count, capacity, address of record 0
+FRAME_DT = 1.0 / 60.0  # the tree's velocity term assumes the study's frame rate, as a Space's bodies would
+# The spatial hash walks every cell an object's box covers, and floors coordinates / cell size
+# into a C int: beyond these it would loop for minutes or overflow (found by the stress study).
+MAX_HASH_CELLS_PER_OBJECT = 4096
+MAX_HASH_CELL_COORDINATE = 2.0**30
+
+
+# cpBB is 32 bytes, returned in memory (System V x86-64): the caller passes the address to fill
+# as a hidden first argument, and the callee returns that address.
+@nb.cfunc(types.CPointer(types.float64)(types.CPointer(types.float64), types.CPointer(types.float64)), cache=True)
+def _box_of(out, record):
+    out[0], out[1], out[2], out[3] = record[0], record[1], record[2], record[3]
+    return out
+
+
+# cpVect (two doubles) comes back in two floating-point registers, as a pair of doubles does.
+@nb.cfunc(types.UniTuple(types.float64, 2)(types.CPointer(types.float64)), cache=True)
+def _velocity_of(record):
+    return record[4], record[5]
+
+
+@nb.cfunc(types.uint32(types.intp, types.intp, types.uint32, types.CPointer(types.int64)), cache=True)
+def _collect(a, b, pair_id, data):
+    """Store the pair (smaller index first) while there is room; count it either way."""
+    count = data[0]
+    if count < data[1]:
+        i, j = (a - data[2]) // RECORD_BYTES, (b - data[2]) // RECORD_BYTES
+        data[HEADER + 2 * count] = min(i, j)
+        data[HEADER + 2 * count + 1] = max(i, j)
+    data[0] = count + 1
+    return pair_id
+
+
+BOX_OF = ffi.cast("cpSpatialIndexBBFunc", _box_of.address)
+VELOCITY_OF = ffi.cast("void *", _velocity_of.address)
+COLLECT = ffi.cast("cpSpatialIndexQueryFunc", _collect.address)
+
+
+class _ChipmunkIndex(BroadPhase):
+    exact = False
+    reports = "boxes"
+
+    def _new_index(self, positions: np.ndarray, radii: np.ndarray):
+        raise NotImplementedError
+
+    def _reset(self, positions, radii):
+        self.close()
+        self._records = np.zeros((self.n, RECORD))
+        self._previous = positions.copy()
+        self._write_boxes(positions)
+        self._index = self._new_index(positions, radii)
+        base = self._records.ctypes.data
+        for i in range(self.n):
+            self._index.klass.insert(self._index, ffi.cast("void *", base + i * RECORD_BYTES), i)
+        self._buffer = np.zeros(HEADER + 2 * max(64, 4 * self.n), dtype=np.int64)
+        self._engine_s = None
+
+    def _write_boxes(self, positions: np.ndarray) -> None:
+        r = self.radii
+        self._records[:, 0] = positions[:, 0] - r
+        self._records[:, 1] = positions[:, 1] - r
+        self._records[:, 2] = positions[:, 0] + r
+        self._records[:, 3] = positions[:, 1] + r
+
+    def _update(self, positions):
+        self._write_boxes(positions)
+        self._records[:, 4:6] = (positions - self._previous) / FRAME_DT
+        self._previous = positions.copy()
+
+    def _pairs(self):
+        buffer = self._buffer
+        while True:
+            buffer[0], buffer[1], buffer[2] = 0, (len(buffer) - HEADER) // 2, self._records.ctypes.data
+            start = time.perf_counter()
+            self._index.klass.reindexQuery(self._index, COLLECT, ffi.cast("void *", buffer.ctypes.data))
+            self._engine_s = time.perf_counter() - start
+            count = int(buffer[0])
+            if count <= buffer[1]:
+                break
+            # Too many pairs for the buffer: grow it and ask again (the index's state allows it:
+            # a second query reports the same pairs).
+            self._buffer = buffer = np.zeros(HEADER + 4 * count, dtype=np.int64)
+        self._stats = {"candidates": count}
+        return buffer[HEADER:HEADER + 2 * count].reshape(-1, 2).copy()
+
+    def engine_broadphase_s(self) -> float | None:
+        return self._engine_s
+
+    def close(self):
+        if getattr(self, "_index", None) is not None:
+            lib.cpSpatialIndexFree(self._index)
+        self._index = None
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:  # at interpreter exit the library may be gone already
+            pass
+
+
+class ChipmunkSweep1D(_ChipmunkIndex):
+    """Chipmunk's Sweep1D: sorted along x every frame, every pair whose x intervals overlap
+    reported (no y test); boxes that only touch along x are missed (its test is strict)."""
+
+    name = "chipmunk.sweep1d"
+    method = "sweep"
+
+    def _new_index(self, positions, radii):
+        return lib.cpSweep1DNew(BOX_OF, ffi.NULL)
+
+
+class ChipmunkTreeIndex(_ChipmunkIndex):
+    """Chipmunk's bounding-box tree without a Space: fat boxes (10% of each box plus a tenth of
+    its velocity) and a pair cache per leaf, so leaves that stay in their fat box keep their pairs."""
+
+    name = "chipmunk.bbtree_index"
+    method = "tree"
+
+    def _new_index(self, positions, radii):
+        index = lib.cpBBTreeNew(BOX_OF, ffi.NULL)
+        lib.cpBBTreeSetVelocityFunc(index, VELOCITY_OF)
+        return index
+
+
+class ChipmunkHashIndex(_ChipmunkIndex):
+    """Chipmunk's spatial hash without a Space: rehashed every frame, every pair that shares a
+    cell reported (no box test). `dim` defaults to two mean diameters (as chipmunk.hash), `count`
+    to 10 n cells (at least 1000)."""
+
+    name = "chipmunk.hash_index"
+    method = "hash"
+    defaults = {"dim": None, "count": None}
+    sweeps = (Knob("dim", sizes(mean_diameter, HASH_CELL_FACTORS), "hash cell size dim"),
+              Knob("count", lambda s: [max(1000, int(f * s.n)) for f in (1, 3, 10, 30)], "hash table size count"))
+
+    def _new_index(self, positions, radii):
+        dim = self.params["dim"] or (4.0 * float(radii.mean()) if self.n else 1.0) or 1.0
+        count = self.params["count"] or max(1000, 10 * self.n)
+        if not (np.isfinite(dim) and dim > 0):
+            raise ValueError(f"{self.name}: dim must be a positive size, got {dim!r}")
+        self._dim = float(dim)
+        self._check_cells(positions)
+        return lib.cpSpaceHashNew(self._dim, int(count), BOX_OF, ffi.NULL)
+
+    def _check_cells(self, positions: np.ndarray) -> None:
+        if not self.n:
+            return
+        r, dim = self.radii, self._dim
+        cells = (np.floor((positions + r[:, None]) / dim) - np.floor((positions - r[:, None]) / dim) + 1).prod(axis=1)
+        if cells.max() > MAX_HASH_CELLS_PER_OBJECT:
+            raise ValueError(f"{self.name}: an object covers {cells.max():.3g} cells of size {dim:g}, over Chipmunk's "
+                             f"hash limit here of {MAX_HASH_CELLS_PER_OBJECT} (it walks every cell); give a larger dim")
+        reach = float(np.abs(positions).max() + r.max()) / dim
+        if reach >= MAX_HASH_CELL_COORDINATE:
+            raise ValueError(f"{self.name}: coordinates reach {reach:.3g} cells of size {dim:g} from the origin, "
+                             f"beyond the {MAX_HASH_CELL_COORDINATE:.3g} that Chipmunk's int cell indices hold")
+
+    def _update(self, positions):
+        self._check_cells(positions)
+        super()._update(positions)

@@ -1,0 +1,86 @@
+"""MuJoCo's collision pipeline: its sweep-and-prune broad phase and sphere contacts.
+
+The model is built with `MjSpec`: one body per circle with a free joint and a sphere geom at
+z = 0 (mocap bodies would be welded to the world, whose pairs MuJoCo filters out), gravity 0.
+Per frame the positions go into `qpos` as one array write, `mj_kinematics` places the geoms and
+`mj_collision` runs the broad phase and the narrow phase; the pairs are the contacts'
+geoms (`d.contact.geom[:ncon]`), read as one array: "contacts". MuJoCo times its own broad phase
+(`mjTIMER_COL_BROAD`): that is the engine's broad-phase time.
+
+Limits, refused before they are hit: body ids are 16 bits (at most 65533 bodies), and
+`mj_collision` takes about 2 n^2 bytes of the model's arena for its broad phase, which must be
+reserved when the model is compiled (the arena here is sized from n; at n = 40000, 3.2 GB).
+"""
+
+from __future__ import annotations
+
+import os
+
+import mujoco
+import numpy as np
+
+from .base import EMPTY_PAIRS, BroadPhase, Limits
+
+MAX_BODIES = 65533  # mjModel counts bodies (the world included) in 16 bits, less a few reserved ids
+ARENA_BYTES_PER_BODY_PAIR = 2.0  # the broad phase's scratch: n^2 / 2 ints
+ARENA_BASE = 64 << 20
+# Refuse a model whose arena would take more than this share of the machine's memory.
+MEMORY_SHARE = 0.5
+
+
+def machine_memory() -> int:
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+class MujocoSap(BroadPhase):
+    """MuJoCo's sweep and prune along the principal axis of the geoms, then its sphere contacts."""
+
+    name, method = "mujoco.sap", "sweep"
+    exact = False
+    reports = "contacts"
+    limits = Limits(zero_radius=False, objects=MAX_BODIES,
+                    why="MuJoCo's spheres need a positive size, and it numbers bodies in 16 bits")
+
+    def _reset(self, positions, radii):
+        n = self.n
+        arena = int(ARENA_BYTES_PER_BODY_PAIR * (n + 1) ** 2 + ARENA_BASE)
+        if arena > MEMORY_SHARE * machine_memory():
+            raise ValueError(f"{self.name}: n = {n} needs a {arena / 2**30:.1f} GB arena for MuJoCo's broad phase, "
+                             f"over {MEMORY_SHARE:.0%} of this machine's memory")
+        spec = mujoco.MjSpec()
+        spec.option.gravity = [0.0, 0.0, 0.0]
+        spec.memory = arena
+        for (x, y), r in zip(positions.tolist(), radii.tolist()):
+            # Mass and inertia given, not derived from the sphere: a tiny sphere would be too light
+            # for MuJoCo ("mass and inertia of moving bodies must be larger than mjMINVAL").
+            body = spec.worldbody.add_body(pos=[x, y, 0.0], mass=1.0, inertia=[1.0, 1.0, 1.0], explicitinertial=True)
+            body.add_freejoint()
+            body.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[r, 0.0, 0.0])
+        self._model = spec.compile()
+        self._data = mujoco.MjData(self._model)
+        self._qpos = self._data.qpos.reshape(n, 7) if n else np.zeros((0, 7))
+        self._qpos[:, 3] = 1.0  # unit quaternion
+        self._broad = self._data.timer[mujoco.mjtTimer.mjTIMER_COL_BROAD]
+        self._engine_s = None
+        self._update(positions)
+
+    def _update(self, positions):
+        self._qpos[:, 0:2] = positions
+        mujoco.mj_kinematics(self._model, self._data)
+
+    def _pairs(self):
+        before = self._broad.duration
+        mujoco.mj_collision(self._model, self._data)
+        self._engine_s = self._broad.duration - before
+        ncon = self._data.ncon
+        self._stats = {"contacts": int(ncon)}
+        if not ncon:
+            return EMPTY_PAIRS.copy()
+        geoms = self._data.contact.geom[:ncon].astype(np.int64)  # geom k is object k
+        return np.column_stack([geoms.min(axis=1), geoms.max(axis=1)])
+
+    def engine_broadphase_s(self) -> float | None:
+        return self._engine_s
+
+    def close(self):
+        self._model = self._data = None

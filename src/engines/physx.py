@@ -1,0 +1,200 @@
+"""NVIDIA PhysX 5 broad phases through ovphysx (CPU mode): sweep and prune, multi-box pruning, and
+the GPU broad phase, which PhysX runs as its parallel automatic box pruning (PABP) on the CPU.
+
+ovphysx simulates a USD stage: the circles become `Sphere` prims in the plane z = 0, each a
+rigid body with a collider and a contact report, in a `PhysicsScene` whose
+`physxScene:broadphaseType` selects the broad phase ("SAP", "MBP" or "GPU"), gravity 0, sleeping
+off. The stage is written as a .usda file, populated through ovstage and attached once. Per
+frame, positions (and zero velocities) go in through one bulk write session; `pairs()` steps
+the scene and reads every contact point of the step in one call (`read_raw_contact_data` of a
+contact binding over all bodies): flat arrays holding both bodies' path handles per point,
+mapped to indices by a lookup table built once. No Python runs per object or per pair.
+
+PhysX hands over contacts, not its broad phase's pairs: the narrow phase ran first, so this
+reports "contacts". Its contact offset (0.4 here, PhysX's default for these sizes) makes contacts
+of spheres up to 0.8 apart, which count as false positives. PhysX stores poses in float32.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import warnings
+from pathlib import Path
+
+import numpy as np
+import ovphysx
+import ovstage
+from ovphysx import PhysX
+from ovphysx.samples.python_samples.schema_support import physx_schema_paths
+from ovphysx.types import ObjectScope, SimObjectType
+
+from .base import EMPTY_PAIRS, BroadPhase, Limits
+from .pairs import canonical
+
+FRAME_DT = 1.0 / 60.0
+PREFIX = "/World/s"  # object k is the prim /World/s<k>
+
+_started = False
+
+
+def _start_process() -> None:
+    """Once per process, before the first instance: CPU mode (a startup-only setting) and the
+    PhysX schemas (registered before the first population, ovstage's rule)."""
+    global _started
+    if not _started:
+        PhysX.set_cpu_mode(True)
+        ovstage.population.register_usd_schemas([str(p) for p in physx_schema_paths()])
+        _started = True
+
+
+def scene_usda(positions: np.ndarray, radii: np.ndarray, broadphase: str) -> str:
+    lines = ["#usda 1.0", "(", '    defaultPrim = "World"', "    metersPerUnit = 1", '    upAxis = "Z"', ")",
+             'def Xform "World"', "{", '    def PhysicsScene "physicsScene" (', '        prepend apiSchemas = '
+             '["PhysxSceneAPI"]', "    )", "    {", "        vector3f physics:gravityDirection = (0, 0, -1)",
+             "        float physics:gravityMagnitude = 0", f'        uniform token physxScene:broadphaseType = "{broadphase}"',
+             "        bool physxScene:enableGPUDynamics = false", "    }"]
+    body = ('    def Sphere "s{i}" (\n        prepend apiSchemas = ["PhysicsRigidBodyAPI", "PhysicsCollisionAPI", '
+            '"PhysxContactReportAPI", "PhysxRigidBodyAPI"]\n    )\n    {{\n        double radius = {r!r}\n'
+            '        double3 xformOp:translate = ({x!r}, {y!r}, 0)\n        uniform token[] xformOpOrder = '
+            '["xformOp:translate"]\n        float physxContactReport:threshold = 0\n'
+            '        float physxRigidBody:sleepThreshold = 0\n    }}')
+    lines += [body.format(i=i, r=r, x=x, y=y) for i, ((x, y), r) in enumerate(zip(positions.tolist(), radii.tolist()))]
+    return "\n".join(lines + ["}"]) + "\n"
+
+
+class _PhysX(BroadPhase):
+    exact = False
+    reports = "contacts"
+    # A sphere of radius 0 is an invalid shape to PhysX: it leaves the object out, and its pairs are lost.
+    limits = Limits(zero_radius=False, why="PhysX cannot create a sphere of radius 0")
+    broadphase = ""  # physxScene:broadphaseType
+
+    def _reset(self, positions, radii):
+        self.close()
+        if self.n == 0:  # no bodies: nothing for PhysX to do (and a contact binding needs one)
+            return
+        self._folder = Path(tempfile.mkdtemp(prefix="broadphase-physx-"))
+        usda = self._folder / "scene.usda"
+        usda.write_text(scene_usda(positions, radii, self.broadphase))
+        _start_process()
+        self._physx = PhysX()
+        self._stage = ovstage.Stage(f"{self.name}-{id(self)}")
+        ovstage.population.open_usd(self._stage, str(usda), ordinal=1, domains=ovstage.PopulationDomain.ALL)
+        self._stage.advance_write_floor(ordinal=1).wait()
+        self._physx.wait_task(self._physx.attach_ovstage(self._stage, read_ordinal=1))
+        self._physx.wait_all()
+        self._query = self._physx.query(SimObjectType.RIGID_BODY, scope=ObjectScope.ALL).wait()
+        self._bind_contacts(max(64, 16 * self.n))
+        self._known = (np.empty(0, np.uint64), np.empty(0, np.int64))  # actor ids seen, sorted; their objects
+        self._rows = None  # object index of each row of the write groups, found at the first write
+        self._xyz = np.zeros((self.n, 3), np.float32)
+        self._update(positions)
+
+    def _bind_contacts(self, capacity: int) -> None:
+        """A contact binding over every body, holding up to `capacity` contact points per step."""
+        if getattr(self, "_contacts", None) is not None:
+            self._contacts.destroy()
+        with warnings.catch_warnings():  # contact bindings are "deprecated": still the only bulk contact read
+            warnings.simplefilter("ignore", DeprecationWarning)
+            self._contacts = self._physx.create_contact_binding(sensor_patterns=[PREFIX + "*"],
+                                                                 max_contact_data_count=capacity)
+        self._buffers = (np.zeros((capacity, 1), np.float32), np.zeros((capacity, 3), np.float32),
+                         np.zeros((capacity, 3), np.float32), np.zeros((capacity, 1), np.float32),
+                         np.zeros((max(self._contacts.sensor_count, 1), 2), np.uint32),
+                         np.zeros((capacity, 2), np.uint64))
+
+    def _objects(self, ids: np.ndarray) -> np.ndarray:
+        """The object index of each actor id of the contact reads. The ids belong to the binding
+        (not the stage's path dictionary): each new one is resolved to its path once, then found
+        by bisection in the sorted ids already known."""
+        known, index = self._known
+        at = np.minimum(np.searchsorted(known, ids), max(len(known) - 1, 0))
+        new = ids[known[at] != ids] if len(known) else ids
+        if len(new):
+            new = np.unique(new)
+            paths = self._contacts.get_other_actor_paths_from_ids(new)
+            objects = np.array([int(p[len(PREFIX):]) if p.startswith(PREFIX) else -1 for p in paths], dtype=np.int64)
+            if (objects < 0).any():
+                raise RuntimeError(f"{self.name}: a contact names {paths[int(np.argmax(objects < 0))]!r}, not an object")
+            known, index = np.concatenate([known, new]), np.concatenate([index, objects])
+            order = np.argsort(known)
+            self._known = known, index = known[order], index[order]
+            at = np.searchsorted(known, ids)
+        return index[at]
+
+    def _update(self, positions):
+        if self._physx is None:
+            return
+        self._xyz[:, :2] = positions
+        self._write_positions()
+
+    def _write_positions(self) -> None:
+        """The objects' positions (self._xyz) and zero velocities, in one write session."""
+        with self._physx.write(self._query, ["position", "linearVelocity"]).wait() as session:
+            while (group := session.fetch_next().wait()) is not None:
+                if group.attribute_index == 0:
+                    if self._rows is None:
+                        self._rows = self._row_objects(group)
+                    group.tensors[0].assign(self._xyz[self._rows])
+                else:
+                    group.tensors[0].zero_()
+                session.commit_sync(group)
+
+    def _row_objects(self, group) -> np.ndarray:
+        paths = self._query.dictionary.get_path_strings(group.prim_list)
+        return np.array([int(p[len(PREFIX):]) for p in paths], dtype=np.int64)
+
+    def _pairs(self):
+        if self._physx is None:
+            return EMPTY_PAIRS.copy()
+        self._physx.step_sync(FRAME_DT)
+        forces, points, normals, separations, layout, handles = self._buffers
+        count = self._contacts.read_raw_contact_data(forces, points, normals, separations, layout, handles)
+        while count >= len(handles):
+            # More contact points than the binding holds: a larger one, and the step again from the
+            # same positions (they and the velocities are written anew each frame, so it is the same step).
+            self._bind_contacts(4 * len(handles))
+            self._write_positions()
+            self._physx.step_sync(FRAME_DT)
+            forces, points, normals, separations, layout, handles = self._buffers
+            count = self._contacts.read_raw_contact_data(forces, points, normals, separations, layout, handles)
+        objects = self._objects(handles[:count].ravel()).reshape(-1, 2)
+        self._stats = {"contact_points": int(count)}
+        return canonical(objects[:, 0], objects[:, 1])
+
+    def close(self):
+        physx, self._physx = getattr(self, "_physx", None), None
+        if physx is None:
+            return
+        self._contacts.destroy()
+        self._contacts = None
+        self._query.close().wait()
+        physx.wait_task(physx.detach_ovstage())
+        self._stage.destroy()
+        physx.destroy()
+        shutil.rmtree(self._folder, ignore_errors=True)
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:
+            pass
+
+
+class PhysXSap(_PhysX):
+    """PhysX's sweep and prune (incremental, along three axes)."""
+
+    name, broadphase, method = "physx.sap", "SAP", "sweep"
+
+
+class PhysXMbp(_PhysX):
+    """PhysX's multi-box pruning: the world cut into regions, a sweep and prune in each."""
+
+    name, broadphase, method = "physx.mbp", "MBP", "sweep"
+
+
+class PhysXPabp(_PhysX):
+    """PhysX's GPU broad phase, which runs on the CPU as parallel automatic box pruning (PABP)."""
+
+    name, broadphase, method = "physx.pabp", "GPU", "sweep"
