@@ -17,17 +17,13 @@ of spheres up to 0.8 apart, which count as false positives. PhysX stores poses i
 
 from __future__ import annotations
 
+import importlib.util
 import shutil
 import tempfile
 import warnings
 from pathlib import Path
 
 import numpy as np
-import ovphysx
-import ovstage
-from ovphysx import PhysX
-from ovphysx.samples.python_samples.schema_support import physx_schema_paths
-from ovphysx.types import ObjectScope, SimObjectType
 
 from .base import EMPTY_PAIRS, BroadPhase, Limits
 from .pairs import canonical
@@ -35,17 +31,32 @@ from .pairs import canonical
 FRAME_DT = 1.0 / 60.0
 PREFIX = "/World/s"  # object k is the prim /World/s<k>
 
-_started = False
+# ovphysx is imported where it is first used, in the process that runs PhysX: loading its native
+# runtime starts threads, and a process that forks after that (the studies fork one child per
+# backend) hands its children a runtime that crashes or hangs in the second child and after.
+for _package in ("ovphysx", "ovstage", "physx_usd_schemas"):
+    if importlib.util.find_spec(_package) is None:
+        raise ModuleNotFoundError(f"No module named {_package!r}")
+ov = None  # the ovphysx modules, once loaded: ov.ovphysx, ov.ovstage, ov.PhysX, ...
 
 
-def _start_process() -> None:
-    """Once per process, before the first instance: CPU mode (a startup-only setting) and the
-    PhysX schemas (registered before the first population, ovstage's rule)."""
-    global _started
-    if not _started:
-        PhysX.set_cpu_mode(True)
+def _start_process():
+    """Once per process, before the first instance: import ovphysx, set CPU mode (a startup-only
+    setting) and register the PhysX schemas (before the first population, ovstage's rule)."""
+    global ov
+    if ov is None:
+        from types import SimpleNamespace
+
+        import ovphysx
+        import ovstage
+        from ovphysx.samples.python_samples.schema_support import physx_schema_paths
+        from ovphysx.types import ObjectScope, SimObjectType
+
+        ovphysx.PhysX.set_cpu_mode(True)
         ovstage.population.register_usd_schemas([str(p) for p in physx_schema_paths()])
-        _started = True
+        ov = SimpleNamespace(ovphysx=ovphysx, ovstage=ovstage, PhysX=ovphysx.PhysX, ObjectScope=ObjectScope,
+                             SimObjectType=SimObjectType)
+    return ov
 
 
 def scene_usda(positions: np.ndarray, radii: np.ndarray, broadphase: str) -> str:
@@ -77,14 +88,14 @@ class _PhysX(BroadPhase):
         self._folder = Path(tempfile.mkdtemp(prefix="broadphase-physx-"))
         usda = self._folder / "scene.usda"
         usda.write_text(scene_usda(positions, radii, self.broadphase))
-        _start_process()
-        self._physx = PhysX()
-        self._stage = ovstage.Stage(f"{self.name}-{id(self)}")
-        ovstage.population.open_usd(self._stage, str(usda), ordinal=1, domains=ovstage.PopulationDomain.ALL)
+        ov = _start_process()
+        self._physx = ov.PhysX()
+        self._stage = ov.ovstage.Stage(f"{self.name}-{id(self)}")
+        ov.ovstage.population.open_usd(self._stage, str(usda), ordinal=1, domains=ov.ovstage.PopulationDomain.ALL)
         self._stage.advance_write_floor(ordinal=1).wait()
         self._physx.wait_task(self._physx.attach_ovstage(self._stage, read_ordinal=1))
         self._physx.wait_all()
-        self._query = self._physx.query(SimObjectType.RIGID_BODY, scope=ObjectScope.ALL).wait()
+        self._query = self._physx.query(ov.SimObjectType.RIGID_BODY, scope=ov.ObjectScope.ALL).wait()
         self._bind_contacts(max(64, 16 * self.n))
         self._known = (np.empty(0, np.uint64), np.empty(0, np.int64))  # actor ids seen, sorted; their objects
         self._rows = None  # object index of each row of the write groups, found at the first write
