@@ -269,3 +269,18 @@ def test_report_only_redoes_the_table_from_the_rows(finished_run, tmp_path, caps
     printed = capsys.readouterr().out
     assert "own.grid" in printed and "total ms" in printed and (out / "compare.png").stat().st_size > 10_000
     assert np.isfinite(pd.read_csv(out / "results.csv").t_total_s).any()
+
+
+def test_a_job_asked_for_twice_is_measured_once(tmp_path):
+    """An adaptive study (the essay's search for the best grid size) asks for some jobs again."""
+    from scenes import generate
+    from studies.lib.harness import Job
+    from studies.lib.runner import Runner
+
+    writer = RowWriter(tmp_path)
+    runner = Runner(writer)
+    job = Job("own.grid", {"p": 4}, scene=generate("uniform", 64, seed=1), frames=2)
+    first, again = runner.run(job), runner.run(Job("own.grid", {"p": 4}, scene=job.scene, frames=2))
+    writer.finish()
+    assert again is first
+    assert len(records(tmp_path / "results.csv")) == 2

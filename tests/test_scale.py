@@ -30,8 +30,22 @@ def test_ours_against_engines_picks_the_fastest_of_each_kind_where_both_ran():
     })
     versus = ours_against_engines_per_n(medians)
     # n = 128 has no engine (essay.sap is not one), so only n = 64 is compared.
-    assert versus.to_dict("records") == [{"dist": "uniform", "n": 64, "ours": "own.sap", "ours_ms": 0.2,
-                                          "engine": "chipmunk.bbtree", "engine_ms": 3.0, "ratio": 3.0 / 0.2}]
+    assert versus[["dist", "n", "ours", "ours_ms", "engine", "engine_ms", "ratio"]].to_dict("records") == [
+        {"dist": "uniform", "n": 64, "ours": "own.sap", "ours_ms": 0.2, "engine": "chipmunk.bbtree", "engine_ms": 3.0,
+         "ratio": 3.0 / 0.2}]
+    assert versus.timed_engine.isna().all()  # no engine reported its own time
+
+
+def test_ours_against_the_engines_own_timers():
+    medians = pd.DataFrame({
+        "dist": ["uniform"] * 4, "n": [64] * 4,
+        "backend": ["own.grid", "own.sap", "mujoco.sap", "chipmunk.bbtree_index"],
+        "ms": [0.5, 0.2, 3.0, 1.0], "broad_ms": [0.1, 0.15, 2.5, 0.9], "engine_bp_ms": [None, None, 1.2, 0.6],
+    })
+    r = ours_against_engines_per_n(medians).iloc[0]
+    # End to end: own.sap against chipmunk.bbtree_index; own timers: chipmunk's index call against own.grid.
+    assert (r.ours, r.engine, r.ratio) == ("own.sap", "chipmunk.bbtree_index", 1.0 / 0.2)
+    assert (r.timed_engine, r.ours_bp, r.bp_ratio) == ("chipmunk.bbtree_index", "own.grid", 0.6 / 0.1)
 
 
 def test_scale_study_quick(tmp_path):

@@ -26,7 +26,7 @@ class RapierBvh(BroadPhase):
     exact = False
     reports = "boxes"
     defaults = {"prediction": 0.002}
-    sweeps = (Knob("prediction", fixed([0.0, 0.002, 0.02, 0.2, 2.0]), "prediction distance"),)
+    sweeps = (Knob("prediction", fixed([1e-4, 0.002, 0.02, 0.2, 2.0]), "prediction distance"),)
 
     def _reset(self, positions, radii):
         prediction = self.params["prediction"]

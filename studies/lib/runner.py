@@ -32,6 +32,7 @@ class Runner:
                  replay: dict[str, list[dict]] | None = None) -> None:
         self.writer, self.output, self.replay = writer, output, replay
         self._cached: tuple[str, Trajectory] | None = None
+        self._done: dict[str, Outcome] = {}  # this study's jobs so far: none is measured twice
 
     def trajectory(self, scene: Scene, frames: int) -> Trajectory:
         """`scene` stepped for `frames` frames (frame 0 included), computed once per scene: a
@@ -45,16 +46,24 @@ class Runner:
         return traj
 
     def run(self, job: Job) -> Outcome:
+        """The job's outcome: measured now, or the one this study already has (an adaptive study,
+        such as a search, may ask for a job twice), or read back from an earlier run's rows."""
         if job.scene is None:
             raise ValueError(f"job {job.backend} has no scene to run on")
+        key = job.key
+        if key not in self._done:
+            self._done[key] = self._run(job, key)
+        return self._done[key]
+
+    def _run(self, job: Job, key: str) -> Outcome:
         stored = self.replay if self.replay is not None else self.writer.done if self.writer is not None else {}
-        if job.key in stored:
-            rows = stored[job.key]
+        if key in stored:
+            rows = stored[key]
             return Outcome(job.backend, rows[-1]["status"], rows, resumed=True)
         if self.replay is not None:
             return Outcome(job.backend, "not measured", [])
         traj = self.trajectory(job.scene, job.frames + 1)
-        fixed = {"backend": job.backend, **scene_columns(traj), **job.tag, "job": job.key}
+        fixed = {"backend": job.backend, **scene_columns(traj), **job.tag, "job": key}
         write = (lambda rows: self.writer.write(rows, fixed)) if self.writer is not None else None
         outcome = run_isolated(job, traj, write)
         said = outcome.rows and outcome.status.startswith(outcome.rows[-1]["status"])
