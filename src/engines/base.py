@@ -62,6 +62,25 @@ class Limits:
 NO_LIMITS = Limits()
 
 
+def hash_cells_problem(positions: np.ndarray, radii: np.ndarray, cell: float, most: int, dims: int = 2,
+                       reach: float = math.inf) -> str | None:
+    """What is wrong for a spatial hash of cells of size `cell` that walks every cell an object's
+    box covers (in `dims` dimensions, the third as deep as the object) and indexes cells with C
+    ints: an object over more than `most` cells, or a coordinate over `reach` cells from the origin."""
+    if not len(radii):
+        return None
+    per_side = np.floor((positions + radii[:, None]) / cell) - np.floor((positions - radii[:, None]) / cell) + 1
+    cells = per_side.prod(axis=1) * (per_side.max(axis=1) if dims == 3 else 1)
+    if cells.max() > most:
+        k = int(cells.argmax())
+        return (f"object {k} covers {cells[k]:.3g} cells of size {cell:.3g}, over the {most} this hash walks per "
+                f"object in reasonable time; give a larger cell")
+    far = float(np.abs(positions).max() + radii.max()) / cell
+    if far >= reach:
+        return f"coordinates reach {far:.3g} cells of size {cell:.3g} from the origin, beyond its int cell indices"
+    return None
+
+
 class BroadPhase(ABC):
     """Base class: subclasses implement `_reset`, `_update` and `_pairs` on validated arrays.
 

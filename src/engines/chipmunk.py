@@ -14,11 +14,15 @@ import numpy as np
 import pymunk
 import pymunk.batch as batch
 
-from .base import BroadPhase
+from .base import BroadPhase, hash_cells_problem
 from .knobs import HASH_CELL_FACTORS, Knob, mean_diameter, sizes
 from .pairs import canonical
 
 SHAPES = ("box", "circle")
+# Chipmunk's hash walks every cell an object's box covers and floors coordinates / cell size into
+# C ints: beyond these it loops for minutes (the ints overflow) instead of failing.
+MAX_HASH_CELLS_PER_OBJECT = 1 << 20  # a million cells, walked every frame
+MAX_HASH_CELL_COORDINATE = 2.0**30
 STEP_DT = 1.0 / 60.0  # kinematic bodies have zero velocity, so dt only feeds Chipmunk's bookkeeping
 
 
@@ -130,4 +134,18 @@ class ChipmunkHash(_Chipmunk):
         if not (np.isfinite(dim) and dim > 0):
             raise ValueError(f"{self.name}: dim must be a positive size, got {dim!r}")
         self._stats = {"dim": float(dim), "count": int(count)}
+        self._dim = float(dim)
+        self._check_cells(positions)
         space.use_spatial_hash(float(dim), int(count))
+
+    def _check_cells(self, positions: np.ndarray) -> None:
+        """Chipmunk's hash hangs (it walks every cell of a box, and its int cell indices overflow)
+        instead of failing: the study found it looping for minutes at coordinates of 1e12."""
+        problem = hash_cells_problem(positions, self.radii, self._dim, MAX_HASH_CELLS_PER_OBJECT,
+                                     reach=MAX_HASH_CELL_COORDINATE)
+        if problem:
+            raise ValueError(f"{self.name}: {problem} (Chipmunk's spatial hash; `dim` sets the cell)")
+
+    def _update(self, positions):
+        self._check_cells(positions)
+        super()._update(positions)

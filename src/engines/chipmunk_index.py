@@ -27,7 +27,8 @@ import numpy as np
 import pymunk._chipmunk
 from numba import types
 
-from .base import BroadPhase
+from .base import BroadPhase, hash_cells_problem
+from .chipmunk import MAX_HASH_CELL_COORDINATE, MAX_HASH_CELLS_PER_OBJECT
 from .knobs import HASH_CELL_FACTORS, Knob, mean_diameter, sizes
 
 CDEF = """
@@ -70,10 +71,6 @@ RECORD = 6  # doubles per object: l, b, r, t, vx, vy
 RECORD_BYTES = RECORD * 8
 HEADER = 3  # the pair buffer starts with: count, capacity, address of record 0
 FRAME_DT = 1.0 / 60.0  # the tree's velocity term assumes the study's frame rate, as a Space's bodies would
-# The spatial hash walks every cell an object's box covers, and floors coordinates / cell size
-# into a C int: beyond these it would loop for minutes or overflow (found by the stress study).
-MAX_HASH_CELLS_PER_OBJECT = 4096
-MAX_HASH_CELL_COORDINATE = 2.0**30
 
 
 # cpBB is 32 bytes, returned in memory (System V x86-64): the caller passes the address to fill
@@ -214,17 +211,10 @@ class ChipmunkHashIndex(_ChipmunkIndex):
         return lib.cpSpaceHashNew(self._dim, int(count), BOX_OF, ffi.NULL)
 
     def _check_cells(self, positions: np.ndarray) -> None:
-        if not self.n:
-            return
-        r, dim = self.radii, self._dim
-        cells = (np.floor((positions + r[:, None]) / dim) - np.floor((positions - r[:, None]) / dim) + 1).prod(axis=1)
-        if cells.max() > MAX_HASH_CELLS_PER_OBJECT:
-            raise ValueError(f"{self.name}: an object covers {cells.max():.3g} cells of size {dim:g}, over Chipmunk's "
-                             f"hash limit here of {MAX_HASH_CELLS_PER_OBJECT} (it walks every cell); give a larger dim")
-        reach = float(np.abs(positions).max() + r.max()) / dim
-        if reach >= MAX_HASH_CELL_COORDINATE:
-            raise ValueError(f"{self.name}: coordinates reach {reach:.3g} cells of size {dim:g} from the origin, "
-                             f"beyond the {MAX_HASH_CELL_COORDINATE:.3g} that Chipmunk's int cell indices hold")
+        problem = hash_cells_problem(positions, self.radii, self._dim, MAX_HASH_CELLS_PER_OBJECT,
+                                     reach=MAX_HASH_CELL_COORDINATE)
+        if problem:
+            raise ValueError(f"{self.name}: {problem} (Chipmunk's spatial hash; `dim` sets the cell)")
 
     def _update(self, positions):
         self._check_cells(positions)

@@ -12,11 +12,12 @@ from __future__ import annotations
 import coal
 import numpy as np
 
-from .base import BroadPhase
+from .base import BroadPhase, Limits, hash_cells_problem
 from .knobs import HASH_CELL_FACTORS, Knob, mean_diameter, sizes
 from .pairs import canonical
 
 MAX_CONTACTS = 1 << 30
+MAX_HASH_CELLS_PER_OBJECT = 1 << 17  # pairs() took 0.04 s for 59k cells, 2 s for 439k, 41 s for 1.6M
 
 
 class _Coal(BroadPhase):
@@ -73,6 +74,8 @@ class CoalSap(_Coal):
     """Sweep and prune on all three axes with incremental updates."""
 
     name, manager, method = "coal.sap", "SaPCollisionManager", "sweep"
+    # Segfaults from coordinates of 1e16 on (50 objects spread that far; 7e15 passed).
+    limits = Limits(coordinate=1e15, why="coal's SaP segfaults once coordinates reach 1e16")
     breaks = ("coal's SaP misses overlaps depending on the order objects were registered in, and segfaults on "
               "spheres of radius 0.")
 
@@ -94,6 +97,8 @@ class CoalTree(_Coal):
     """Dynamic AABB tree (FCL's default manager)."""
 
     name, manager, method = "coal.tree", "DynamicAABBTreeCollisionManager", "tree"
+    # From coordinates of 1e16 on it raises "The bounding volume has a negative volume".
+    limits = Limits(coordinate=1e15, why="coal's tree computes negative volumes once coordinates reach 1e16")
     breaks = "coal's dynamic AABB tree rejects zero-volume boxes ('The bounding volume has a negative volume')."
 
 
@@ -101,6 +106,9 @@ class CoalTreeArray(_Coal):
     """Dynamic AABB tree stored in an array."""
 
     name, manager, method = "coal.tree_array", "DynamicAABBTreeArrayCollisionManager", "tree"
+    # Segfaults on radii of 1e154 and on coordinates of 1e308 (it squares box sizes, as FCL's tree does).
+    limits = Limits(coordinate=1e150, radius=1e150, why="coal's array tree overflows and crashes on boxes "
+                    "beyond ~1e154")
 
 
 class CoalHash(_Coal):
@@ -114,9 +122,23 @@ class CoalHash(_Coal):
 
     def _manager(self, positions, radii):
         cell = self.params["cell"] or (4.0 * float(radii.mean()) if len(radii) else 1.0)
+        self._cell = float(cell) or 1.0
+        self._check_cells(positions)
         lo = (positions - radii[:, None]).min(axis=0) if len(radii) else np.zeros(2)
         hi = (positions + radii[:, None]).max(axis=0) if len(radii) else np.ones(2)
         r = float(radii.max()) if len(radii) else 1.0
         return coal.SpatialHashingCollisionManager(
             float(cell), np.array([lo[0], lo[1], -r]), np.array([hi[0], hi[1], r])
         )
+
+    def _check_cells(self, positions: np.ndarray) -> None:
+        """coal's hash inserts an object into every cell its box covers, in three dimensions, and its
+        pair search slows with them: one object of radius 1e4 among 300 of radius 10 (1.6 million
+        cells) took 41 s a frame, one of 1e12 did not finish."""
+        problem = hash_cells_problem(positions, self.radii, self._cell, MAX_HASH_CELLS_PER_OBJECT, dims=3)
+        if problem:
+            raise ValueError(f"{self.name}: {problem} (coal's spatial hash; `cell` sets the cell)")
+
+    def _update(self, positions):
+        self._check_cells(positions)
+        super()._update(positions)

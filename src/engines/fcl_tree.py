@@ -13,7 +13,7 @@ from __future__ import annotations
 import fcl
 import numpy as np
 
-from .base import BroadPhase
+from .base import BroadPhase, Limits
 from .pairs import canonical
 
 TINY_RADIUS = 1e-300
@@ -30,6 +30,9 @@ class FclTree(BroadPhase):
     """FCL's dynamic AABB tree (the only manager python-fcl exposes)."""
 
     name = "fcl.tree"
+    # Its tree multiplies box sizes: past ~1e154 (the square root of the largest double) they
+    # overflow and it segfaults (coordinates of 1.5e154, or radii of 1e154, in 50-object scenes).
+    limits = Limits(coordinate=1e150, radius=1e150, why="FCL's tree overflows and crashes on boxes beyond ~1e154")
     method = "tree"
     exact = False
     reports = "boxes"
