@@ -9,6 +9,7 @@ as a failing test here rather than passing unnoticed.
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -351,6 +352,8 @@ REFUSED = [  # (backend, positions, radii, the words of the refusal, what the en
      "ValueError"),  # "The bounding volume has a negative volume"
     ("coal.tree_array", SPREAD * 100, np.full(50, 1e155), "radius 1e+155 (object 0), over its limit of 1e+150",
      "SIGSEGV"),
+    ("coal.tree_array", generate("uniform", 1024, seed=0).positions, np.full(1024, 10.0),
+     "1024 objects, over its limit of 512", "SIGSEGV"),  # with glibc's smallest mmap threshold, below
     ("chipmunk.hash", SPREAD * 1e12, np.ones(50), "coordinates reach 2.49e+11 cells of size 4 from the origin",
      "timeout"),  # its int cell indices overflow and it loops
     ("coal.hash", generate("uniform", 300, seed=1).positions, ONE_LARGE, "object 0 covers",
@@ -403,9 +406,12 @@ def test_the_guards_are_needed_unguarded_the_engine_fails(name, positions, radii
     make(name)  # skips when the engine is missing
     np.save(tmp_path / "p.npy", np.asarray(positions, dtype=float))
     np.save(tmp_path / "r.npy", np.asarray(radii, dtype=float))
+    # glibc's smallest mmap threshold: a freed large block goes back to the system at once, so a use
+    # after free (coal's array tree) segfaults whatever was imported before.
+    env = {**os.environ, "MALLOC_MMAP_THRESHOLD_": "131072"}
     try:
         done = subprocess.run([sys.executable, "-c", UNGUARDED, name, str(tmp_path / "p.npy"), str(tmp_path / "r.npy")],
-                              capture_output=True, text=True, timeout=10)
+                              capture_output=True, text=True, timeout=10, env=env)
         seen = "SIGSEGV" if done.returncode == -11 else done.stdout.strip().splitlines()[-1]
     except subprocess.TimeoutExpired:
         seen = "timeout"
@@ -428,3 +434,21 @@ def test_box2d_v2_profile_timer_drops_the_start_times_sub_millisecond_part():
         differences.append(profile.solve - profile.broadphase)
     differences = np.array(differences)
     assert np.allclose(differences, np.round(differences), atol=2e-3), differences
+
+
+@pytest.mark.engine_limitation
+def test_coal_tree_array_crashes_in_a_plain_script_but_not_after_a_large_import(tmp_path):
+    """Why coal.tree_array at n = 8192 segfaulted in a plain script but not after
+    engines.available(): its use after free reads a freed node array, which glibc unmaps when it
+    was large, unless an earlier import (mujoco) raised glibc's mmap threshold by freeing large blocks."""
+    make("coal.tree_array")
+    scene = generate("uniform", 8192, seed=0)
+    np.save(tmp_path / "p.npy", scene.positions)
+    np.save(tmp_path / "r.npy", scene.radii)
+    outcomes = []
+    for first in ("", "import mujoco\n"):
+        script = first + UNGUARDED.replace("    print(backend.pairs().tolist())", "    print(len(backend.pairs()))")
+        done = subprocess.run([sys.executable, "-c", script, "coal.tree_array", str(tmp_path / "p.npy"),
+                               str(tmp_path / "r.npy")], capture_output=True, text=True, timeout=120)
+        outcomes.append("SIGSEGV" if done.returncode == -11 else "ran")
+    assert outcomes == ["SIGSEGV", "ran"]

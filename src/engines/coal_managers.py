@@ -103,12 +103,20 @@ class CoalTree(_Coal):
 
 
 class CoalTreeArray(_Coal):
-    """Dynamic AABB tree stored in an array."""
+    """Dynamic AABB tree stored in an array (at most 512 objects: see its limits)."""
 
     name, manager, method = "coal.tree_array", "DynamicAABBTreeArrayCollisionManager", "tree"
-    # Segfaults on radii of 1e154 and on coordinates of 1e308 (it squares box sizes, as FCL's tree does).
-    limits = Limits(coordinate=1e150, radius=1e150, why="coal's array tree overflows and crashes on boxes "
-                    "beyond ~1e154")
+    # Its insertLeaf keeps reading the node array after allocateNode() has grown it (a use after
+    # free: valgrind shows it). Once that array is 128 KB or more, glibc may have mapped it on its
+    # own and hands it back to the system when freed: the read then segfaults (n = 8192 in a plain
+    # script; from n = 800 with glibc's smallest mmap threshold, MALLOC_MMAP_THRESHOLD_=131072).
+    # Importing a library that allocates and frees large blocks first (mujoco, warp: as
+    # engines.available() does) raises glibc's threshold, so the freed array stays mapped: no
+    # crash, but stale reads. Below 512 objects its array stays under 128 KB. It also squares box
+    # sizes, as FCL's tree does: radii of 1e154 segfault.
+    limits = Limits(coordinate=1e150, radius=1e150, objects=512,
+                    why="coal's array tree reads its node array after freeing it: from about 800 objects "
+                        "that can segfault; boxes beyond ~1e154 overflow")
 
 
 class CoalHash(_Coal):
