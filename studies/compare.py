@@ -14,6 +14,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 import engines
+from scenes import coverage
 
 from .lib.cli import Parser, command_line, matched_backends, run_cli, warn_unavailable
 from .lib.figures import error_against_time
@@ -70,8 +71,9 @@ def main(argv: list[str] | None = None) -> int:
         start = time.perf_counter()
         traj = runner.trajectory(scene, args.frames + 1)  # frame 0 is every backend's warm-up
         print(f"scene {scene.name}: n={scene.n}, radii {scene.radius_range[0]:g}..{scene.radius_range[1]:g}, "
-              f"box {scene.box}, {args.frames} timed frames x {args.repeat} repeats "
-              f"(trajectory and exact pairs computed once in {time.perf_counter() - start:.1f} s)")
+              f"box {scene.box} ({coverage(scene.radii, scene.box):.0%} of it covered by the objects' boxes), "
+              f"{args.frames} timed frames x {args.repeat} repeats (trajectory and exact pairs computed once in "
+              f"{time.perf_counter() - start:.1f} s)")
         out.meta(scene={**scene_columns(traj), "box": scene.box, "frames": args.frames, "repeats": args.repeat},
                  unavailable=unavailable)
         outcomes = {}

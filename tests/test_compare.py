@@ -247,3 +247,16 @@ def test_headline_sets_our_fastest_against_the_fastest_engine():
     untimed = table.assign(engine_broadphase_ms=nan)
     assert ours_against_engines(untimed).splitlines()[1] == "no engine that ran reports its own broad-phase time"
     assert ours_against_engines(table.drop(["chipmunk.bbtree", "bullet.dbvt"])) is None
+
+
+def test_a_backend_that_cannot_even_be_built_within_its_budget_is_skipped(misbehaving, small_trajectory, monkeypatch):
+    """Brute force at n = 10^7 spent all of its timeout before its first timed frame: the setup
+    now has a limit of its own, a hundred budgets per frame (here 1 s, the floor lowered for the test)."""
+    from studies.lib import harness
+
+    monkeypatch.setattr(harness, "SETUP_FLOOR_S", 1.0)
+    start = time.monotonic()
+    outcome = run_isolated(Job("test.hang", budget_s=0.001, timeout_s=60), small_trajectory)
+    assert outcome.status == ("skipped: building it and its warm-up frame took over 1 s, 100 times the budget per "
+                              "frame")
+    assert time.monotonic() - start < 10

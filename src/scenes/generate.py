@@ -8,6 +8,23 @@ from .scene import ESSAY_BOX, Scene, check_box
 
 ESSAY_SPEED = 10.0  # px per second, random direction
 ESSAY_RADIUS = 10.0
+# The share of the box the objects' boxes cover in the essay's scene: 2048 boxes of side 20 in a
+# 2000 x 2000 box. A described scene keeps it unless its box is given.
+ESSAY_COVERAGE = 2048 * 20.0**2 / 2000.0**2
+
+
+def coverage(radii: np.ndarray, box) -> float:
+    """Summed area of the objects' boxes over the box's area."""
+    xmin, ymin, xmax, ymax = box
+    return float((4.0 * radii**2).sum() / ((xmax - xmin) * (ymax - ymin)))
+
+
+def box_for_coverage(radii: np.ndarray, share: float = ESSAY_COVERAGE) -> tuple[float, float, float, float]:
+    """The square box from the origin in which the objects' boxes cover `share` of the area (the
+    essay's density by count where every radius is zero)."""
+    area = float((4.0 * radii**2).sum()) / share
+    side = np.sqrt(area) if area > 0 else ESSAY_BOX[2] * float(np.sqrt(max(len(radii), 1) / 2048))
+    return 0.0, 0.0, float(side), float(side)
 
 
 def _radii(rng: np.random.Generator, n: int, radius: float | None, radii: tuple[float, float] | None) -> np.ndarray:
@@ -62,7 +79,7 @@ def generate(
     radius: float | None = None,
     radii: tuple[float, float] | None = None,
     seed: int = 0,
-    box: tuple[float, float, float, float] = ESSAY_BOX,
+    box: tuple[float, float, float, float] | None = ESSAY_BOX,
     speed: float = ESSAY_SPEED,
     clusters: int = 8,
     moves: bool = True,
@@ -73,6 +90,8 @@ def generate(
 
     `radius` gives equal radii (default the essay's 10); `radii=(min, max)` gives mixed sizes,
     log-uniform between the bounds. Every circle starts at `speed` in a random direction.
+    `box=None` sizes a square box from the origin so that the objects' boxes cover the same share
+    of it as in the essay's scene (`ESSAY_COVERAGE`).
     """
     if dist not in DISTRIBUTIONS:
         raise ValueError(f"unknown distribution {dist!r}; choose one of {', '.join(DISTRIBUTIONS)}")
@@ -83,9 +102,9 @@ def generate(
     if not (np.isfinite(speed) and speed >= 0):
         raise ValueError(f"speed must be finite and non-negative, got {speed!r}")
     n = int(n)
-    box = check_box(box)
     rng = np.random.default_rng(seed)
     r = _radii(rng, n, radius, radii)
+    box = check_box(box_for_coverage(r) if box is None else box)
     pos = _place(dist, rng, n, box, clusters)
     pos[:, 0] = _inside(pos[:, 0], r, box[0], box[2])
     pos[:, 1] = _inside(pos[:, 1], r, box[1], box[3])

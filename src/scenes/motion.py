@@ -7,14 +7,22 @@ only moved.
 
 from __future__ import annotations
 
+import shutil
+import sys
+import tempfile
+import weakref
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 from functools import cached_property
+from pathlib import Path
 
 import numba as nb
 import numpy as np
+from tqdm import tqdm
 
 from own.reference import box_pairs, narrow_phase
 
+from .costs import SAMPLE, costs
 from .scene import Scene
 
 FRAME_DT = 1.0 / 60.0  # seconds per frame: speeds are in units per second, as in the essay
@@ -67,14 +75,48 @@ def move(positions, velocities, radii, dt, box, walls):
             positions[i, a] = x
 
 
+class FramePairs(Sequence):
+    """The exact pairs of each frame: arrays in memory, or files read back one frame at a time
+    (memory-mapped), so that a large scene's memory follows one frame's pairs; None for a frame
+    whose pairs were not computed (not verified)."""
+
+    def __init__(self, items: list, folder: Path | None = None) -> None:
+        self._items = items
+        self.folder = folder  # the files' folder, removed with the last FramePairs that uses it
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return FramePairs(self._items[index], self.folder)
+        item = self._items[index]
+        return np.load(item, mmap_mode="r") if isinstance(item, Path) else item
+
+    @classmethod
+    def in_folder(cls, frames: int) -> "FramePairs":
+        folder = Path(tempfile.mkdtemp(prefix="broadphase-pairs-"))
+        pairs = cls([None] * frames, folder)
+        weakref.finalize(pairs, shutil.rmtree, folder, True)
+        return pairs
+
+    def store(self, frame: int, pairs: np.ndarray, name: str) -> None:
+        if self.folder is None:
+            self._items[frame] = pairs
+        else:
+            path = self.folder / f"{name}-{frame}.npy"
+            np.save(path, pairs)
+            self._items[frame] = path
+
+
 @dataclass(frozen=True)
 class Trajectory:
     """Frames of one scene: positions (frames, n, 2), plus the exact pairs of each frame."""
 
     scene: Scene
     positions: np.ndarray
-    box_pairs: list[np.ndarray]
-    contacts: list[np.ndarray]
+    box_pairs: FramePairs  # None for frames not verified
+    contacts: FramePairs
     velocities: np.ndarray  # (frames, n, 2), the velocity at the start of each frame
 
     @property
@@ -104,8 +146,10 @@ class Trajectory:
 
         scene = self.scene.with_(positions=self.scene.positions[order], radii=self.scene.radii[order],
                                  velocities=self.scene.velocities[order])
-        return Trajectory(scene, np.ascontiguousarray(self.positions[:, order]), [mapped(p) for p in self.box_pairs],
-                          [mapped(p) for p in self.contacts], np.ascontiguousarray(self.velocities[:, order]))
+        return Trajectory(scene, np.ascontiguousarray(self.positions[:, order]),
+                          FramePairs([None if p is None else mapped(p) for p in self.box_pairs]),
+                          FramePairs([None if p is None else mapped(p) for p in self.contacts]),
+                          np.ascontiguousarray(self.velocities[:, order]))
 
     @cached_property
     def swept_contacts(self) -> np.ndarray:
@@ -120,7 +164,7 @@ class Trajectory:
         scale = float(np.sum(radii**2 * np.abs(self.velocities[0]).sum(axis=1))) or 1.0
         depth = 0.0
         for frame, pairs in zip(self.positions, self.contacts):
-            if len(pairs):
+            if pairs is not None and len(pairs):
                 d = np.hypot(*(frame[pairs[:, 1]] - frame[pairs[:, 0]]).T)
                 depth = max(depth, float((radii[pairs[:, 0]] + radii[pairs[:, 1]] - d).max()))
         return {
@@ -130,30 +174,42 @@ class Trajectory:
         }
 
 
-def simulate(scene: Scene, frames: int, dt: float = FRAME_DT) -> Trajectory:
-    """Step `scene` for `frames` frames (frame 0 is the initial state)."""
+def simulate(scene: Scene, frames: int, dt: float = FRAME_DT, verify: Collection[int] | None = None) -> Trajectory:
+    """Step `scene` for `frames` frames (frame 0 is the initial state). The exact pairs of the
+    frames in `verify` (every frame by default) are computed; they go to files, one frame at a
+    time, when all of them would not fit comfortably in memory. A bar on stderr shows the
+    progress of a run that takes more than 2 s."""
     if int(frames) != frames or frames < 1:
         raise ValueError(f"frames must be a positive integer, got {frames!r}")
     if not (np.isfinite(dt) and dt > 0):
         raise ValueError(f"dt must be positive and finite, got {dt!r}")
+    # A scene with the essay's response computes every frame's contacts for its motion anyway;
+    # only the verified frames' are kept.
+    verified = set(range(frames)) if verify is None else {int(f) for f in verify if 0 <= f < frames}
+    on_disk = scene.n > SAMPLE and costs(scene, frames, len(verified)).on_disk
+    boxes, contacts = (FramePairs.in_folder(frames), FramePairs.in_folder(frames)) if on_disk else \
+        (FramePairs([None] * frames), FramePairs([None] * frames))
     pos = scene.positions.copy()
     vel = scene.velocities.copy()
     box = np.asarray(scene.box, dtype=np.float64)
     out_pos = np.empty((frames, scene.n, 2))
     out_vel = np.empty((frames, scene.n, 2))
-    boxes, contacts = [], []
-    for f in range(frames):
+    for f in tqdm(range(frames), desc="trajectory and exact pairs", unit="frame", delay=2, file=sys.stderr,
+                  leave=False):
         out_pos[f], out_vel[f] = pos, vel
         if f > 0 and not scene.moves:  # static: the same frame, same pairs, repeated
-            boxes.append(boxes[0])
-            contacts.append(contacts[0])
+            boxes._items[f], contacts._items[f] = boxes._items[0], contacts._items[0]
             continue
-        found = box_pairs(pos, scene.radii)
-        touching = narrow_phase(pos, scene.radii, found)
-        boxes.append(found)
-        contacts.append(touching)
+        responds = scene.moves and scene.responds
+        if f in verified or responds:
+            found = box_pairs(pos, scene.radii)
+            touching = narrow_phase(pos, scene.radii, found)
+            if f in verified:
+                boxes.store(f, found, "boxes")
+                contacts.store(f, touching, "contacts")
+            del found
         if scene.moves:
-            if scene.responds:
+            if responds:
                 respond(pos, vel, scene.radii, touching)
             move(pos, vel, scene.radii, dt, box, scene.walls)
     return Trajectory(scene, out_pos, boxes, contacts, out_vel)

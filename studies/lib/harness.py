@@ -29,6 +29,10 @@ from scenes import Scene
 from scenes.motion import Trajectory
 
 
+SETUP_BUDGETS = 100.0  # the setup limit in budgets per frame
+SETUP_FLOOR_S = 30.0
+
+
 @dataclass
 class Job:
     """One backend with its parameters, run `repeats` times over frames 1..`frames` of a scene.
@@ -47,6 +51,7 @@ class Job:
     scene: Scene | None = None  # what the runner simulates for this job (run_isolated takes a trajectory)
     frames: int = 1  # timed frames; the trajectory has one more, the warm-up frame 0
     tag: dict[str, Any] = field(default_factory=dict)
+    verify: tuple[int, ...] | None = None  # the frames whose pairs are checked (None: every frame)
 
     def describe(self) -> str:
         """The backend with the parameters given, e.g. 'own.grid(p=16)'."""
@@ -54,12 +59,21 @@ class Job:
         return f"{self.backend}({given})" if given else self.backend
 
     @property
+    def setup_limit_s(self) -> float:
+        """How long building the backend and its warm-up frame may take: SETUP_BUDGETS times the
+        budget per frame, at least SETUP_FLOOR_S (JIT compilation, an engine's world), at most the
+        timeout. Without it a hopeless backend (brute force at n = 10^7) spent all of its timeout
+        before its first timed frame could be judged."""
+        return min(self.timeout_s, max(SETUP_FLOOR_S, SETUP_BUDGETS * self.budget_s))
+
+    @property
     def key(self) -> str:
         """A stable id of what is measured, so a resumed study can tell which jobs are done; it
         records the frames and repeats planned, so their rows tell whether the job finished."""
         return json.dumps({"backend": self.backend, "params": {k: self.params[k] for k in sorted(self.params)},
                            "scene": scene_id(self.scene) if self.scene is not None else None, "frames": self.frames,
-                           "repeats": self.repeats, **{k: self.tag[k] for k in sorted(self.tag)}}, default=str)
+                           "repeats": self.repeats, **({"verify": list(self.verify)} if self.verify is not None else {}),
+                           **{k: self.tag[k] for k in sorted(self.tag)}}, default=str)
 
 
 def scene_id(scene: Scene) -> str:
@@ -76,8 +90,12 @@ class InvalidOutput(Exception):
 
 
 def _count(frame: int, traj: Trajectory, got: np.ndarray, reports: str) -> dict[str, Any]:
-    """Missed and extra pairs of one frame (`got`: the candidates' keys) against the exact reference."""
+    """Missed and extra pairs of one frame (`got`: the candidates' keys) against the exact reference;
+    only the candidates' count for a frame that is not verified (its reference was not computed)."""
     n = traj.scene.n
+    if traj.box_pairs[frame] is None:
+        return {"candidates": len(got), "true_pairs": None, "missed": None, "false_positives": None,
+                "box_pairs": None, "box_missed": None}
     truth = keys(traj.contacts[frame], n)
     boxes = keys(traj.box_pairs[frame], n)
     found_true = np.isin(truth, got, assume_unique=True).sum()
@@ -101,8 +119,9 @@ def _checked(candidates: np.ndarray, n: int) -> np.ndarray:
     return candidates
 
 
-def measure(job: Job, traj: Trajectory, repeat: int) -> list[dict[str, Any]]:
-    """Rows for one repeat: frame 0 is the untimed warm-up (build, JIT compile), then frames 1..F.
+def measure(job: Job, traj: Trajectory, repeat: int, ready: Callable[[], None] | None = None) -> list[dict[str, Any]]:
+    """Rows for one repeat: frame 0 is the untimed warm-up (build, JIT compile), then frames 1..F;
+    `ready()` is called once the warm-up is done.
 
     A first timed frame over the job's budget is kept with a "skipped" status and ends the repeat.
     """
@@ -115,6 +134,8 @@ def measure(job: Job, traj: Trajectory, repeat: int) -> list[dict[str, Any]]:
         first = _checked(backend.pairs(), traj.scene.n)
         narrow_phase(traj.positions[0], radii, first)
         setup = time.perf_counter() - start
+        if ready:
+            ready()
         rows = []
         seen = []  # candidate keys of every frame, for the tunneling count
         gc.collect()
@@ -175,7 +196,7 @@ def _child(job: Job, conn) -> None:
         resource.setrlimit(resource.RLIMIT_AS, (mapped + int(job.memory_mb * 2**20), resource.RLIM_INFINITY))
     try:
         for r in range(job.repeats):
-            rows = measure(job, _TRAJECTORY, r)
+            rows = measure(job, _TRAJECTORY, r, (lambda: conn.send(("ready", None))) if r == 0 else None)
             conn.send(("rows", rows))
             if rows and rows[-1]["status"] != "ok":  # over budget: no further repeats
                 # The repeats before it stand: say so, or a table row would contradict its note.
@@ -215,14 +236,20 @@ def run_isolated(job: Job, traj: Trajectory, on_rows: Callable[[list[dict]], Non
     child.close()
     rows: list[dict] = []
     status = None
-    deadline = time.monotonic() + job.timeout_s
+    start = time.monotonic()
+    deadline = start + job.timeout_s
+    setup_deadline = start + job.setup_limit_s if job.setup_limit_s < job.timeout_s else None
     try:
         while status is None:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
+            now = time.monotonic()
+            if setup_deadline is not None and now >= setup_deadline:
+                status = (f"skipped: building it and its warm-up frame took over {job.setup_limit_s:.3g} s, "
+                          f"{SETUP_BUDGETS:g} times the budget per frame")
+                break
+            if now >= deadline:
                 status = f"timeout after {job.timeout_s:g} s"
                 break
-            if not parent.poll(min(remaining, 0.5)):
+            if not parent.poll(min((setup_deadline or deadline) - now, 0.5)):
                 continue
             try:
                 kind, payload = parent.recv()
@@ -230,14 +257,16 @@ def run_isolated(job: Job, traj: Trajectory, on_rows: Callable[[list[dict]], Non
                 proc.join()
                 status = _crash_status(proc.exitcode)
                 break
-            if kind == "rows":
+            if kind == "ready":
+                setup_deadline = None
+            elif kind == "rows":
                 rows += payload
                 if on_rows:
                     on_rows(payload)
             else:
                 status = "ok" if kind == "done" else payload
-    finally:  # a timeout, or the study stopping (an interrupt, a full disk): the child goes too
-        if status is None or status.startswith("timeout"):
+    finally:  # a timeout, a setup over its limit, or the study stopping: the child goes too
+        if status is None or status.startswith(("timeout", "skipped: building")):
             proc.kill()
         proc.join(timeout=5)
         parent.close()

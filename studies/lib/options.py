@@ -4,7 +4,8 @@ A study picks the groups it needs and states its defaults once, at the call; the
 written from them. A study that needs something else gets a new name (recommend's
 `--time-limit` is the whole run's limit, `--timeout` one run's).
 
-- `--n --dist --radius --radii --speed --seed`: a generated scene
+- `--n --dist --radius --radii --speed --seed --box`: a generated scene (its box at the essay's coverage unless
+  `--box` is given)
 - `--scene FILE.csv`: your own scene file (stress adds it to its scenes)
 - `--backends PATTERN[,PATTERN]`: which backends, as globs over the registry
 - `--frames F`: timed frames per run, after one untimed warm-up frame
@@ -24,7 +25,7 @@ from __future__ import annotations
 
 import argparse
 
-from scenes import DISTRIBUTIONS, Scene, generate
+from scenes import DISTRIBUTIONS, ESSAY_COVERAGE, Scene, generate
 from scenes.io import load_scene
 
 from .cli import CliError
@@ -41,6 +42,9 @@ def add_scene_options(parser: argparse.ArgumentParser, n: int = 2048) -> None:
     sizes.add_argument("--radii", metavar="MIN:MAX", help="mixed sizes, log-uniform between MIN and MAX")
     g.add_argument("--speed", type=float, default=10.0, help="speed in units per second (default 10)")
     g.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    g.add_argument("--box", type=float, metavar="SIDE",
+                   help="side of the square box (default: the box in which the objects' boxes cover "
+                        f"{ESSAY_COVERAGE:.1%} of the area, as in the essay's scene)")
     add_scene_file_option(g)
 
 
@@ -62,7 +66,8 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
             except ValueError:
                 raise CliError(f"--radii must look like MIN:MAX (e.g. 1:100), got {args.radii!r}") from None
             radii = (lo, hi)
-        return generate(args.dist, args.n, radius=args.radius, radii=radii, seed=args.seed, speed=args.speed)
+        box = None if args.box is None else (0.0, 0.0, args.box, args.box)
+        return generate(args.dist, args.n, radius=args.radius, radii=radii, seed=args.seed, speed=args.speed, box=box)
     except ValueError as exc:
         raise CliError(str(exc)) from None
 

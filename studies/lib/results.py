@@ -241,7 +241,7 @@ def summarise(rows: pd.DataFrame, by: list[str], first: Iterable[str] = (), stat
     (`update_ms`, `update_iqr_ms`, ... `total_ms`), the quartiles of the total, `low_ms` and
     `high_ms` (the fastest and slowest repeat's median total), medians of the pair counts, the
     mean false positives and candidates beyond those promised per frame (`extra_per_frame`),
-    candidates per true pair over all frames, misses summed (`box_missed` stays empty for backends
+    candidates per true pair over the verified frames (`verified` counts them), misses summed (`box_missed` stays empty for backends
     that report contacts), the slowest setup, the peak memory, the tunneling count, and with
     `stats`, the median of each of the backend's counters (`stat_<name>`). `status` is "ok" or
     the group's last other status; `partial` says that a group stopped early but kept rows.
@@ -275,8 +275,12 @@ def summarise(rows: pd.DataFrame, by: list[str], first: Iterable[str] = (), stat
     promised = ok["box_pairs"].where(ok["reports"] == "boxes", ok["true_pairs"])
     table["extra_per_frame"] = (ok["candidates"] - promised).groupby([ok[c] for c in by], sort=False,
                                                                         dropna=False).mean()
+    # Over the verified frames (a study may verify a sample of them): their candidates and pairs.
+    verified = ok["true_pairs"].notna()
+    table["verified"] = verified.groupby([ok[c] for c in by], sort=False, dropna=False).sum()
     true = g["true_pairs"].sum()
-    table["cand_per_true"] = g["candidates"].sum() / true.where(true > 0)
+    candidates = ok["candidates"].where(verified).groupby([ok[c] for c in by], sort=False, dropna=False).sum()
+    table["cand_per_true"] = candidates / true.where(true > 0)
     table["missed"] = g["missed"].sum()
     table["box_missed"] = g["box_missed"].sum(min_count=1)
     table["setup_s"] = g["t_setup_s"].max()  # the first repeat's: only it pays for JIT compilation

@@ -13,8 +13,10 @@ from __future__ import annotations
 from typing import Iterable
 
 from scenes import Scene
+from scenes.costs import costs
 from scenes.motion import Trajectory, simulate
 
+from .cli import CliError
 from .harness import Job, Outcome, run_isolated, scene_columns, scene_id
 from .output import Output
 from .results import RowWriter
@@ -34,14 +36,19 @@ class Runner:
         self._cached: tuple[str, Trajectory] | None = None
         self._done: dict[str, Outcome] = {}  # this study's jobs so far: none is measured twice
 
-    def trajectory(self, scene: Scene, frames: int) -> Trajectory:
-        """`scene` stepped for `frames` frames (frame 0 included), computed once per scene: a
-        shorter request is the head of the trajectory already computed, which is the same."""
-        key = scene_id(scene)
+    def trajectory(self, scene: Scene, frames: int, verify: tuple[int, ...] | None = None) -> Trajectory:
+        """`scene` stepped for `frames` frames (frame 0 included), with the exact pairs of the
+        frames in `verify` (all by default), computed once per scene: a shorter request is the
+        head of the trajectory already computed, which is the same. A scene that cannot fit in
+        memory (or its pairs on disk) is refused before any of it is computed."""
+        key = (scene_id(scene), verify)
         if self._cached and self._cached[0] == key and self._cached[1].frames >= frames:
             return self._cached[1].head(frames)
         self._cached = None  # free the old one before computing the next
-        traj = simulate(scene, frames)
+        problem = costs(scene, frames, None if verify is None else len(verify)).problem()
+        if problem:
+            raise CliError(problem)
+        traj = simulate(scene, frames, verify=verify)
         self._cached = (key, traj)
         return traj
 
@@ -62,7 +69,7 @@ class Runner:
             return Outcome(job.backend, rows[-1]["status"], rows, resumed=True)
         if self.replay is not None:
             return Outcome(job.backend, "not measured", [])
-        traj = self.trajectory(job.scene, job.frames + 1)
+        traj = self.trajectory(job.scene, job.frames + 1, job.verify)
         fixed = {"backend": job.backend, **scene_columns(traj), **job.tag, "job": key}
         write = (lambda rows: self.writer.write(rows, fixed)) if self.writer is not None else None
         outcome = run_isolated(job, traj, write)
