@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import engines
+from scenes.costs import costs
 
 from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli, warn_unavailable
 from .lib.figures import backend_colour, new_figure, save
@@ -37,12 +38,33 @@ HOPELESS = 20.0
 TUNE_WITHIN = 3.0
 TUNE_FRAMES = 3  # frames per point of the tuning sweep (one repeat)
 REPORT_S = 3.0  # of the time limit, kept for writing the report and figure
+DEFAULT_FRAMES, DEFAULT_REPEATS = 20, 3
+# Of the time limit: at most this share for stepping the scene and its exact pairs, and for
+# checking every backend's pairs against them (the rest is for the trials themselves).
+TRAJECTORY_SHARE = 0.25
+CHECK_SHARE = 0.25
+CHECK_S_PER_PAIR = 1e-7  # checking a frame's candidates against its pairs (measured: 1.5 s for 15 million)
 
 
 def trial_length(n: int) -> tuple[int, int]:
-    """(timed frames, repeats) per trial: fewer at large n, so the whole run stays near a minute."""
-    frames = 20 if n <= 10_000 else 10 if n <= 30_000 else 5 if n <= 150_000 else 3
-    return frames, 3 if n <= 30_000 else 2
+    """(timed frames, repeats) per trial before the time limit is consulted: fewer at large n."""
+    frames = DEFAULT_FRAMES if n <= 10_000 else 10 if n <= 30_000 else 5 if n <= 150_000 else 3
+    return frames, DEFAULT_REPEATS if n <= 30_000 else 2
+
+
+def fitting_frames(reference_s: float, time_limit: float, wanted: int) -> int:
+    """Timed frames whose trajectory and exact pairs fit TRAJECTORY_SHARE of the limit (at least one)."""
+    return max(1, min(wanted, int(TRAJECTORY_SHARE * time_limit / max(reference_s, 1e-9)) - 1))
+
+
+def verified_frames(frames: int, pairs: float, backends: int, time_limit: float) -> tuple[int, ...] | None:
+    """The frames whose pairs are checked: every one (None) while checking them all for every
+    backend fits CHECK_SHARE of the limit, else an even sample of them (at least the first)."""
+    per_frame = max(pairs, 1.0) * CHECK_S_PER_PAIR * max(backends, 1)
+    fit = int(CHECK_SHARE * time_limit / per_frame)
+    if fit >= frames:
+        return None
+    return tuple(sorted({1 + round(k * (frames - 1) / max(fit - 1, 1)) for k in range(max(fit, 1))}))
 
 
 def run_order(names: list[str]) -> list[str]:
@@ -93,7 +115,7 @@ def verdict(groups: list[list[Entry]], entries: list[Entry], traits: Traits) -> 
     """The recommendation in plain words."""
     lines = [f"Scene: {', '.join(traits.words())}."]
     if not groups:
-        return lines + ["No backend finished without missing pairs: nothing can be recommended."]
+        return lines + [nothing_finished(entries)]
     top = groups[0]
     win = top[0]
     lines.append(f"Use {win.backend} ({params_text(win)}): {win.trial.median_ms:.3g} ms per frame "
@@ -112,6 +134,23 @@ def verdict(groups: list[list[Entry]], entries: list[Entry], traits: Traits) -> 
         lines.append("Never recommended, missed pairs: " + ", ".join(f"{e.backend} ({e.trial.missed} missed)"
                                                                   for e in flagged) + ".")
     return lines
+
+
+def nothing_finished(entries: list[Entry]) -> str:
+    """What happened when no backend can be recommended, as it happened."""
+    missed = [e for e in entries if e.trial.ok and e.trial.missed]
+    if missed:
+        return ("No backend finished without missing pairs: nothing can be recommended ("
+                + ", ".join(f"{e.backend} missed {e.trial.missed}" for e in missed) + ").")
+    partial = sorted((e for e in entries if e.trial.frame_ms == e.trial.frame_ms), key=lambda e: e.trial.frame_ms)
+    text = "No backend finished a frame within its share of the time limit: nothing can be recommended."
+    if partial:
+        best = partial[0]
+        text += (f" The fastest frame measured before a backend was stopped: {best.backend}, "
+                 f"{best.trial.frame_ms:.3g} ms ({best.trial.status}). Give a longer --time-limit.")
+    elif entries:
+        text += " Give a longer --time-limit, or ask for a smaller scene."
+    return text
 
 
 def why(win: Entry, runner: Entry | None, traits: Traits) -> str:
@@ -137,7 +176,10 @@ def why(win: Entry, runner: Entry | None, traits: Traits) -> str:
 
 def plot(entries: list[Entry], groups: list[list[Entry]], path: Path, title: str) -> None:
     shown = sorted((e for e in entries if e.trial.ok), key=lambda e: e.trial.median_ms)
-    if not shown:
+    if not shown:  # the file the report names exists, and says why it is empty
+        fig = new_figure(figsize=(7, 2))
+        fig.text(0.5, 0.5, "No backend finished a frame: nothing to draw", ha="center", va="center")
+        save(fig, path)
         return
     top = {id(e) for e in (groups[0] if groups else [])}
     fig = new_figure(figsize=(7, 0.35 * len(shown) + 1.5))
@@ -192,19 +234,23 @@ def parse(argv: list[str] | None):
 
 
 class Trials:
-    """recommend's trials on one scene: jobs of the runner with the run's frames and repeats, each
-    given its share of the time left (at most --timeout) and stopped past a budget."""
+    """recommend's trials on one scene: jobs of the runner, each given its share of the time left
+    (at most --timeout) and stopped past a budget."""
 
-    def __init__(self, runner: Runner, scene, frames: int, repeats: int, deadline: float, args) -> None:
+    def __init__(self, runner: Runner, scene, frames: int, repeats: int, deadline: float, args,
+                 verify: tuple[int, ...] | None = None) -> None:
         self.runner, self.scene, self.frames, self.repeats, self.deadline = runner, scene, frames, repeats, deadline
+        self.verify = verify
         self.timeout_cap = args.timeout or 120.0
         self.budget_cap = args.budget or float("inf")
 
     def job(self, backend, params, step, repeats=None, frames=None, budget=float("inf"), share=1) -> Job:
         left = self.deadline - time.perf_counter()
         timeout = max(1.0, min(self.timeout_cap, left, 2 * left / share))
+        frames = frames or self.frames
+        verify = None if self.verify is None else tuple(f for f in self.verify if f <= frames) or (1,)
         return Job(backend, dict(params), repeats=repeats or self.repeats, budget_s=min(budget, self.budget_cap),
-                   timeout_s=timeout, scene=self.scene, frames=frames or self.frames, tag={"experiment": step})
+                   timeout_s=timeout, scene=self.scene, frames=frames, tag={"experiment": step}, verify=verify)
 
     def run(self, job: Job) -> Trial:
         """One trial; it may use twice its fair share of the time left."""
@@ -212,6 +258,27 @@ class Trials:
         if trial.status.startswith("timeout"):
             trial.status = f"stopped: not done within its {job.timeout_s:.0f} s share of the time limit"
         return trial
+
+    def sized(self, backend: str, budget: float, share: int) -> "Entry":
+        """One frame first (a valid trial when that is all that fits), then as many frames and
+        repeats as its share of the time left allows, up to the plan's."""
+        probe_job = self.job(backend, {}, "first frame", repeats=1, frames=1, budget=budget, share=share)
+        started = time.perf_counter()
+        probe = self.run(probe_job)
+        if not probe.ok or (self.frames == 1 and self.repeats == 1):
+            return Entry(backend, probe, job=probe_job.key)
+        per_frame = max((time.perf_counter() - started) - probe.setup_s, probe.median_ms / 1e3, 1e-6)
+        left = self.deadline - time.perf_counter()
+        room = max(0.0, 2 * left / share - probe.setup_s)  # a repeat builds the backend anew
+        frames = min(self.frames, max(1, int(room / per_frame)))
+        repeats = min(self.repeats, max(1, int(room / (frames * per_frame + probe.setup_s))))
+        if frames * repeats <= 1:
+            return Entry(backend, probe, job=probe_job.key, note="one frame: no more fitted its share of the time")
+        job = self.job(backend, {}, "trial", repeats=repeats, frames=frames, budget=budget, share=share)
+        trial = self.run(job)
+        if not trial.ok:  # the longer run did not finish in time: its first frame stands
+            return Entry(backend, probe, job=probe_job.key, note=f"one frame: the longer trial {trial.status}")
+        return Entry(backend, trial, job=job.key)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -225,19 +292,15 @@ def main(argv: list[str] | None = None) -> int:
         backends = run_order([b for b in chosen if b not in missing])
         start = time.perf_counter()
         deadline = start + args.time_limit - REPORT_S
-        frames, repeats = trial_length(scene.n)
-        shortened = (args.frames is None and frames < 20) or (args.repeat is None and repeats < 3)
-        frames, repeats = args.frames or frames, args.repeat or repeats
         writer = RowWriter(out.path, args.resume)
         runner = Runner(writer, out)
-        traj = runner.trajectory(scene, frames + 1)
+        frames, repeats, notes, verify = plan_trials(runner, scene, args, len(backends))
+        traj = runner.trajectory(scene, frames + 1, verify)
         traits = measure_traits(traj)
-        notes = [f"Trials: {frames} timed frames x {repeats} repeats per backend"
-                 + (f" (shortened for n = {scene.n:,})" if shortened else "")
-                 + f"; tuning sweeps {TUNE_FRAMES} frames x 1 repeat per point."]
         print(f"scene {scene.name}: {', '.join(traits.words())}")
-        print(notes[0], flush=True)
-        trials = Trials(runner, scene, frames, repeats, deadline, args)
+        for note in notes:
+            print(note, flush=True)
+        trials = Trials(runner, scene, frames, repeats, deadline, args, verify)
         entries: list[Entry] = []
         skipped: list[str] = []
         for k, backend in enumerate(backends):
@@ -246,11 +309,10 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             warm_up(backend)
             best = min((e.trial.median_ms for e in entries if e.eligible), default=float("inf"))
-            budget = max(0.05, HOPELESS * best / 1e3)
-            job = trials.job(backend, {}, "trial", budget=budget, share=len(backends) - k)
-            entries.append(Entry(backend, trials.run(job), job=job.key))
+            entries.append(trials.sized(backend, budget=max(0.05, HOPELESS * best / 1e3), share=len(backends) - k))
             t = entries[-1].trial
-            print(f"  {backend:20} {t.median_ms:10.3f} ms" if t.ok else f"  {backend:20} {t.status}", flush=True)
+            print(f"  {backend:20} {t.median_ms:10.3f} ms" + (f" ({t.frames} frames)" if t.frames < frames else "")
+                  if t.ok else f"  {backend:20} {t.status}", flush=True)
         if not args.no_tune:
             tune(entries, trials, deadline)
         writer.finish()
@@ -259,12 +321,43 @@ def main(argv: list[str] | None = None) -> int:
         if missing:
             notes.append(f"Not available here: {', '.join(missing)}.")
         meta = out.meta(scene=scene_columns(traj), traits=vars(traits), frames=frames, repeats=repeats,
+                        verified=list(verify) if verify else None, time_limit=args.time_limit,
                         unavailable=missing, not_tried=skipped, notes=notes,
                         entries=[{"backend": e.backend, "job": e.job, "tuned": e.tuned, "note": e.note}
                                  for e in entries])
     finish(out.path, entries, meta, Traits(**meta["traits"]))
     print(f"({time.perf_counter() - start:.0f} s)")
     return 0
+
+
+def plan_trials(runner: Runner, scene, args, backends: int) -> tuple[int, int, list[str], tuple[int, ...] | None]:
+    """Frames and repeats per trial and the frames to verify, sized to the time limit from what
+    this scene's first frame costs: its exact pairs are computed once (timed) before the rest."""
+    frames, repeats = trial_length(scene.n)
+    shortened = []
+    if args.frames is None or args.repeat is None:
+        start = time.perf_counter()
+        runner.trajectory(scene, 1)
+        reference_s = time.perf_counter() - start
+        fit = fitting_frames(reference_s, args.time_limit, frames)
+        if fit < frames:
+            shortened.append(f"stepping the scene and its exact pairs takes {reference_s:.2g} s a frame")
+            frames = fit
+        elif frames < DEFAULT_FRAMES:
+            shortened.append(f"n = {scene.n:,}")
+        if repeats < DEFAULT_REPEATS:
+            shortened.append("fewer repeats at this n")
+    frames, repeats = args.frames or frames, args.repeat or repeats
+    pairs = costs(scene, 1).pairs
+    verify = verified_frames(frames, pairs, backends, args.time_limit)
+    notes = [f"Trials: up to {frames} timed frames x {repeats} repeats per backend"
+             + (f" (shortened: {'; '.join(shortened)})" if shortened else "")
+             + "; each backend first runs one frame, and its trial is sized to its share of the time limit from it"
+             + f"; tuning sweeps {TUNE_FRAMES} frames x 1 repeat per point."]
+    if verify is not None:
+        notes.append(f"Pairs checked on frames {', '.join(map(str, verify))} of {frames} only: with about "
+                     f"{pairs:,.0f} pairs a frame, checking every frame of every backend would not fit the time limit.")
+    return frames, repeats, notes, verify
 
 
 def finish(folder: Path, entries: list[Entry], meta: dict, traits: Traits) -> None:

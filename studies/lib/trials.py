@@ -33,6 +33,9 @@ class Trial:
     missed: int = 0  # truly overlapping pairs, plus overlapping boxes for "boxes" backends
     described: str = ""  # the backend with its parameters, e.g. "own.grid(cell=20.0, p=None)"
     last_stats: str = "{}"  # the backend's work counters on the last frame (JSON)
+    frame_ms: float = float("nan")  # its fastest frame measured, even in a run stopped after it
+    frames: int = 0  # timed frames measured (every repeat)
+    setup_s: float = float("nan")  # building it and its warm-up frame
 
     @property
     def ok(self) -> bool:
@@ -47,6 +50,11 @@ class Trial:
         """The job's outcome reduced by the shared summary."""
         ok = [r for r in outcome.rows if r["status"] == "ok"]
         trial = cls(job.backend, dict(job.params), outcome.status if ok or outcome.status != "ok" else "no frames")
+        timed = [r for r in outcome.rows if r.get("t_total_s") is not None]
+        if timed:
+            trial.frame_ms = min(r["t_total_s"] for r in timed) * 1e3
+            trial.setup_s = max(r["t_setup_s"] for r in timed)
+        trial.frames = len(ok)
         if not ok:
             return trial
         line = summarise(pd.DataFrame(ok).assign(backend=job.backend), ["backend"]).iloc[0]
