@@ -108,6 +108,7 @@ class BroadPhase(ABC):
             known = ", ".join(sorted(self.defaults)) or "none"
             raise ValueError(f"{self.name}: unknown parameter(s) {', '.join(unknown)}; known: {known}")
         self.params: dict[str, Any] = {**self.defaults, **params}
+        self._built = False
         self.n = 0
         self.radii = np.empty(0)
         self._stats: dict[str, float] = {}
@@ -119,9 +120,12 @@ class BroadPhase(ABC):
         self._check_limits(pos, radii)
         self.radii, self.n = radii, pos.shape[0]
         self._reset(pos, self.radii)
+        self._built = True
 
     def update(self, positions: npt.ArrayLike) -> None:
         """The same objects (same radii, same order) moved to `positions`."""
+        if not self._built:
+            raise RuntimeError(f"{self.name}: call reset(positions, radii) before update()")
         pos = check_positions(positions, self.n)
         self._check_limits(pos)
         self._update(pos)
@@ -135,6 +139,8 @@ class BroadPhase(ABC):
 
     def pairs(self) -> PairArray:
         """Candidate pairs for the current positions: (m, 2) int64, i < j, unique."""
+        if not self._built:
+            raise RuntimeError(f"{self.name}: call reset(positions, radii) before pairs()")
         return self._pairs()
 
     def stats(self) -> dict[str, float]:

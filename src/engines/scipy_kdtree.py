@@ -11,11 +11,14 @@ from scipy.spatial import cKDTree
 
 from own.common import boxes
 
-from .base import EMPTY_PAIRS, BroadPhase
+from .base import EMPTY_PAIRS, BroadPhase, Limits
 
 
 class KDTree(BroadPhase):
     name = "scipy.kdtree"
+    # Its distances overflow for centres about 1.8e308 apart: it raises "Encountering floating
+    # point overflow" from inside query_pairs.
+    limits = Limits(coordinate=8e307, radius=8e307, why="scipy's k-d tree overflows on distances beyond 1.8e308")
     method = "kdtree"
     exact = False  # exact after the filter, unless query_pairs' own rounding drops a touching pair
     reports = "boxes"

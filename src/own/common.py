@@ -26,8 +26,9 @@ def swept_circles(before: np.ndarray, after: np.ndarray, radii: np.ndarray) -> t
     """Circles whose boxes cover each object's box at both positions (its swept box): centred
     halfway, radius r + half the largest coordinate step, padded by a few ulps so rounding cannot
     make a box smaller than what it must cover."""
-    reach = 0.5 * np.abs(after - before).max(axis=1)
-    mid = 0.5 * (before + after)
+    # Halves first: the sum or difference of coordinates near the largest double would overflow.
+    reach = np.abs(0.5 * after - 0.5 * before).max(axis=1)
+    mid = 0.5 * before + 0.5 * after
     pad = 4 * np.finfo(float).eps * (np.abs(mid).max(axis=1) + radii + reach)
     return mid, radii + reach + pad
 

@@ -102,7 +102,12 @@ def grid_layout(extent, n, p, cell, max_cells, layout, slack=0.0):
         inside = x0 >= ox - mx and y0 >= oy - my and x1 <= ox + wx + mx and y1 <= oy + wy + my
         if inside and (nx == 1 or sx >= 0.5 * wx) and (ny == 1 or sy >= 0.5 * wy):
             return False
-    if p > 0:
+    if not (math.isfinite(sx) and math.isfinite(sy)):
+        # Centres further apart than the largest double: no cell size spans them, so one cell
+        # holds everything (still exact; its cost is quadratic, for input this extreme).
+        cw = ch = float(np.finfo(np.float64).max)
+        nx = ny = 1
+    elif p > 0:
         cw = sx / p if sx > 0 else (sy / p if sy > 0 else 1.0)
         ch = sy / p if sy > 0 else cw
         nx = ny = p

@@ -2,6 +2,8 @@
 
 An optional first line `# box: xmin,ymin,xmax,ymax` gives the walls; without it the box is the
 bounding box of the circles. Every problem is reported as a SceneFileError naming file and line.
+What spreadsheets write is read too: a UTF-8 byte-order mark, and columns separated by
+semicolons or tabs instead of commas (the separator found is named in any error).
 """
 
 from __future__ import annotations
@@ -19,6 +21,14 @@ from .scene import Scene, check_box
 REQUIRED = ("x", "y", "r")
 OPTIONAL = ("vx", "vy")
 BOX_PREFIX = "# box:"
+SEPARATORS = {",": "commas", ";": "semicolons", "\t": "tabs"}
+
+
+def _separator(header: str) -> str:
+    """The separator of a header line: a comma, else a semicolon or a tab if it has one."""
+    if "," in header:
+        return ","
+    return next((sep for sep in (";", "\t") if sep in header), ",")
 
 
 class SceneFileError(ValueError):
@@ -39,7 +49,7 @@ def load_scene(path: str | os.PathLike, name: str | None = None) -> Scene:
     """Read a scene file; raises SceneFileError for anything wrong with it."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # a byte-order mark, as spreadsheets write, is dropped
     except FileNotFoundError:
         raise SceneFileError(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError) as exc:
@@ -53,9 +63,11 @@ def load_scene(path: str | os.PathLike, name: str | None = None) -> Scene:
         except ValueError as exc:
             raise SceneFileError(f"{path}, line 1: bad box line ({exc})") from None
         first = 1
-    rows = list(csv.reader(lines[first:]))
+    separator = _separator(lines[first]) if len(lines) > first else ","
+    rows = list(csv.reader(lines[first:], delimiter=separator))
     if not rows or not any(cell.strip() for cell in rows[0]):
         raise SceneFileError(f"{path}: empty file (expected a header line x,y,r[,vx,vy])")
+    found = "" if separator == "," else f" (columns separated by {SEPARATORS[separator]} here)"
     header = [h.strip().lower() for h in rows[0]]
     header_line = first + 1
     missing = [c for c in REQUIRED if c not in header]
@@ -64,7 +76,7 @@ def load_scene(path: str | os.PathLike, name: str | None = None) -> Scene:
         raise SceneFileError(
             f"{path}, line {header_line}: header must be x,y,r with optional vx,vy; got {','.join(header)}"
             + (f" (missing {','.join(missing)})" if missing else "")
-            + (f" (unknown {','.join(extra)})" if extra else "")
+            + (f" (unknown {','.join(extra)})" if extra else "") + found
         )
     if ("vx" in header) != ("vy" in header):
         raise SceneFileError(f"{path}, line {header_line}: give both vx and vy, or neither")
@@ -76,10 +88,11 @@ def load_scene(path: str | os.PathLike, name: str | None = None) -> Scene:
         if not row or not any(cell.strip() for cell in row):
             continue  # blank lines are allowed
         if len(row) != len(header):
-            raise SceneFileError(f"{where}: expected {len(header)} columns ({','.join(header)}), found {len(row)}")
+            raise SceneFileError(f"{where}: expected {len(header)} columns ({','.join(header)}), found {len(row)}"
+                                 + found)
         for slot, c in enumerate(REQUIRED + OPTIONAL):
             if c in col:
-                values[kept, slot] = _number(row[col[c]], where, c)
+                values[kept, slot] = _number(row[col[c]], where + found, c)
         if values[kept, 2] < 0:
             raise SceneFileError(f"{where}: radius is negative: {values[kept, 2]:g}")
         kept += 1

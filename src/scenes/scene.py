@@ -15,9 +15,23 @@ FloatArray = npt.NDArray[np.float64]
 ESSAY_BOX: tuple[float, float, float, float] = (0.0, 0.0, 2000.0, 2000.0)
 
 
+def real_array(values: object, what: str) -> np.ndarray:
+    """`values` as a float64 array; complex, boolean and text values are refused (numpy would drop
+    an imaginary part with a warning, or read True as 1), as is anything that is not a number."""
+    arr = np.asarray(values)
+    if arr.dtype == np.float64:
+        return arr
+    if arr.dtype.kind not in "fiuO":
+        raise ValueError(f"{what} must be real numbers, got {arr.dtype} values")
+    try:
+        return arr.astype(np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be real numbers, got values such as {arr.ravel()[0]!r}") from None
+
+
 def check_positions(positions: object, n: int | None = None, what: str = "positions") -> FloatArray:
     """Return `positions` as a C-contiguous (n, 2) float64 array, or raise ValueError naming the problem."""
-    arr = np.asarray(positions, dtype=np.float64)
+    arr = real_array(positions, what)
     if arr.ndim != 2 or arr.shape[1] != 2:
         raise ValueError(f"{what} must have shape (n, 2), got {arr.shape}")
     if n is not None and arr.shape[0] != n:
@@ -44,7 +58,7 @@ def _sum(values: FloatArray) -> float:
 
 def check_radii(radii: object, n: int) -> FloatArray:
     """Return `radii` as a contiguous (n,) float64 array of finite non-negative values, or raise ValueError."""
-    arr = np.asarray(radii, dtype=np.float64)
+    arr = real_array(radii, "radii")
     if arr.ndim != 1 or arr.shape[0] != n:
         raise ValueError(f"radii must have shape ({n},) to match the positions, got {arr.shape}")
     bad = ~np.isfinite(arr) | (arr < 0)

@@ -63,9 +63,15 @@ def draw_frame(fig, positions: np.ndarray, radii: np.ndarray, structure: dict, c
 
     `overlaps`: pairs of truly overlapping circles (highlighted where found); `must_find`: the
     pairs the backend promises (box overlaps or contacts); those absent from `candidates` are
-    drawn in red as missed.
+    drawn in red as missed. A scene whose coordinates pass 1e100 is drawn in units of a power of
+    ten, said on the axes: matplotlib cannot place ticks near the largest double.
     """
     fig.clear()
+    reach = float(np.abs(positions).max() + radii.max()) if len(radii) else 0.0
+    unit = 10.0 ** np.floor(np.log10(reach)) if reach > 1e100 else 1.0
+    if unit != 1.0:
+        positions, radii = positions / unit, radii / unit
+        structure = {k: (v / unit if k != "axis" else v) for k, v in structure.items()}
     intervals = structure.get("intervals")
     if intervals is not None:
         ax, strip = fig.subplots(2, 1, gridspec_kw={"height_ratios": [4, 1]})
@@ -91,10 +97,16 @@ def draw_frame(fig, positions: np.ndarray, radii: np.ndarray, structure: dict, c
     if n:
         lo = (positions - radii[:, None]).min(axis=0)
         hi = (positions + radii[:, None]).max(axis=0)
-        pad = 0.02 * max(float((hi - lo).max()), 1e-9)
-        ax.set_xlim(lo[0] - pad, hi[0] + pad)
-        ax.set_ylim(lo[1] - pad, hi[1] + pad)
+        # Centre and half-span, computed in halves and capped below half the largest double, so
+        # that the span stays a number (matplotlib needs one) even for a scene near that extreme.
+        centre = 0.5 * lo + 0.5 * hi
+        half = min(1.04 * max(float((0.5 * hi - 0.5 * lo).max()), 1e-9), 0.45 * np.finfo(np.float64).max)
+        ax.set_xlim(centre[0] - half, centre[0] + half)
+        ax.set_ylim(centre[1] - half, centre[1] + half)
     ax.set_aspect("equal", adjustable="box")
+    if unit != 1.0:
+        ax.set_xlabel(f"x (in units of {unit:.0e})", fontsize=8)
+        ax.set_ylabel(f"y (in units of {unit:.0e})", fontsize=8)
     ax.set_title(title, fontsize=9)
     if strip is not None:
         axis = int(structure["axis"])

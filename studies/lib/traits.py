@@ -57,14 +57,18 @@ def measure_traits(traj: Trajectory) -> Traits:
     positive = radii[radii > 0]
     spread = float(positive.max() / positive.min()) if len(positive) else 1.0
     lo, hi = pos.min(axis=0) if n else np.zeros(2), pos.max(axis=0) if n else np.ones(2)
-    extent = np.maximum(hi - lo, 1e-300)
+    # Positions as shares of the extent, computed in halves: coordinates near the largest double
+    # would overflow a difference of them.
+    half = np.maximum(0.5 * hi - 0.5 * lo, 1e-300)
+    unit = np.clip((0.5 * pos - 0.5 * lo) / half, 0.0, 1.0) if n else np.zeros((0, 2))
+    extent = 2.0 * half  # inf beyond the largest double: the coverage is then 0
     side = max(1, int(np.sqrt(n / 4)))
-    cells = np.minimum(((pos - lo) / extent * side).astype(np.int64), side - 1) if n else np.zeros((0, 2), int)
+    cells = np.minimum((unit * side).astype(np.int64), side - 1)
     counts = np.bincount(cells[:, 1] * side + cells[:, 0], minlength=side * side) if n else np.zeros(1)
     dispersion = float(counts.var() / counts.mean()) if n else 1.0
-    uniform_std = extent / np.sqrt(12)
-    conc = pos.std(axis=0) / uniform_std if n > 1 else np.ones(2)
-    steps = np.abs(np.diff(traj.positions, axis=0)).max(axis=2) if traj.frames > 1 else np.zeros((1, n))
+    conc = unit.std(axis=0) * np.sqrt(12) if n > 1 else np.ones(2)  # std against a uniform placement's
+    steps = (np.abs(np.diff(0.5 * traj.positions, axis=0)).max(axis=2) * 2.0 if traj.frames > 1
+             else np.zeros((1, n)))
     median_r = float(np.median(radii)) if n else 0.0
     step = float(np.median(steps) / median_r) if median_r > 0 and n else 0.0
     coverage = float((4 * radii**2).sum() / np.prod(extent + 2 * (radii.max() if n else 0)))

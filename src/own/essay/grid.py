@@ -21,6 +21,10 @@ def default_p(n: int, span: float, r_max: float) -> int:
     return p
 
 
+def _cell(v: float, origin: float, width: float, p_cells: int) -> int:
+    return min(int((v - origin) / width), p_cells - 1) if p_cells > 1 else 0
+
+
 class EssayGrid(EssayBroadPhase):
     """p x p cells over the square around the centres; p defaults to `default_p`."""
 
@@ -41,15 +45,17 @@ class EssayGrid(EssayBroadPhase):
         x0 = min(p.x for p in particles)
         y0 = min(p.y for p in particles)
         span = max(max(p.x for p in particles) - x0, max(p.y for p in particles) - y0) or 1.0
-        p_cells = self.params["p"] or default_p(len(particles), span, max(p.r for p in particles))
+        if math.isinf(span):  # centres further apart than the largest double: one cell holds all
+            span = math.inf
+        p_cells = 1 if math.isinf(span) else self.params["p"] or default_p(len(particles), span,
+                                                                           max(p.r for p in particles))
         width = span / p_cells
         cells: list[list[list[Particle]]] = [[[] for _ in range(p_cells)] for _ in range(p_cells)]
         # The printed code started the neighbour loops at index -1, which Python reads as the last.
         first = -1 if self.params["printed_defects"] else 0
         wrapped = 0
         for part in particles:
-            cx = min(int((part.x - x0) / width), p_cells - 1)
-            cy = min(int((part.y - y0) / width), p_cells - 1)
+            cx, cy = _cell(part.x, x0, width, p_cells), _cell(part.y, y0, width, p_cells)
             for nx in range(max(cx - 1, first), min(cx + 2, p_cells)):
                 for ny in range(max(cy - 1, first), min(cy + 2, p_cells)):
                     cells[nx][ny].append(part)
@@ -79,8 +85,7 @@ class EssayGrid(EssayBroadPhase):
                     assert (cx, cy) not in where.setdefault(part.index, set()), f"particle {part.index} twice in a cell"
                     where[part.index].add((cx, cy))
         for part in self._particles:
-            cx = min(int((part.x - x0) / width), p_cells - 1)
-            cy = min(int((part.y - y0) / width), p_cells - 1)
+            cx, cy = _cell(part.x, x0, width, p_cells), _cell(part.y, y0, width, p_cells)
             expected = {(nx % p_cells, ny % p_cells) if wrap else (nx, ny)
                         for nx in range(cx - 1, cx + 2) for ny in range(cy - 1, cy + 2)
                         if (wrap or 0 <= nx) and (wrap or 0 <= ny) and nx < p_cells and ny < p_cells}
