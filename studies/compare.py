@@ -88,6 +88,12 @@ def main(argv: list[str] | None = None) -> int:
     return report(out.path, args.check)
 
 
+def scene_meta_frames(meta: dict) -> int | None:
+    """Timed frames a backend was to run, all repeats (from meta.json)."""
+    scene = meta.get("scene", {})
+    return scene["frames"] * scene["repeats"] if "frames" in scene and "repeats" in scene else None
+
+
 def report(folder: Path, check: bool) -> int:
     """The table, the headline and compare.png, from the rows in `folder`."""
     rows, complete = read_rows(folder)
@@ -96,7 +102,8 @@ def report(folder: Path, check: bool) -> int:
     table = ok_lines(summary).sort_values("total_ms")
     baseline = add_speedup(table) if not table.empty else None
     print()
-    print(format_table(table, baseline) if not table.empty else "no backend produced results")
+    planned = scene_meta_frames(read_meta(folder))
+    print(format_table(table, baseline, planned) if not table.empty else "no backend produced results")
     headline = ours_against_engines(table) if not table.empty else None
     if headline:
         print(headline)
@@ -116,8 +123,8 @@ def report(folder: Path, check: bool) -> int:
     title = f"{scene.get('scene', '?')}: n={scene.get('n', '?')}, {scene.get('frames', '?')} frames x " \
             f"{scene.get('repeats', '?')} repeats"
     written = [str(folder / ("results.csv" if complete else "results.partial.csv")), str(folder / "meta.json")]
-    if not table.empty:
-        written.append(str(error_against_time(table, folder / "compare.png", title)))
+    if len(summary):
+        written.append(str(error_against_time(summary, folder / "compare.png", title)))
     print("\nwrote " + ", ".join(written))
     if check and not table.empty and (missed_total(table) > 0).any():
         print("check FAILED: some backend missed pairs", file=sys.stderr)

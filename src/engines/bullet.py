@@ -10,36 +10,14 @@ come back as false positives, not errors.
 
 from __future__ import annotations
 
-import ctypes
-import os
-import sys
-
 import numpy as np
 
-
-def _import_quietly():
-    """pybullet prints its build time from C on import; keep tables and logs clean.
-
-    An import failure is still raised as a Python exception: only C-level output is dropped.
-    """
-    sys.stdout.flush()
-    sys.stderr.flush()
-    saved = {fd: os.dup(fd) for fd in (1, 2)}
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    for fd in saved:
-        os.dup2(devnull, fd)
-    try:
-        import pybullet
-    finally:
-        ctypes.CDLL(None).fflush(None)  # C buffers its output when it is not a terminal
-        for fd, copy in saved.items():
-            os.dup2(copy, fd)
-            os.close(copy)
-        os.close(devnull)
-    return pybullet
+from .quiet import native_output_silenced
 
 
-pybullet = _import_quietly()
+
+with native_output_silenced():  # pybullet prints its build time from C on import
+    import pybullet
 
 from .base import BroadPhase
 from .pairs import canonical

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from .base import EMPTY_PAIRS, BroadPhase, Limits
+from .quiet import native_output_silenced
 from .pairs import canonical
 
 FRAME_DT = 1.0 / 60.0
@@ -52,6 +53,14 @@ def _start_process():
         from ovphysx.samples.python_samples.schema_support import physx_schema_paths
         from ovphysx.types import ObjectScope, SimObjectType
 
+        # ovphysx warns that Warp was built with CUDA (it needs no GPU here), and Warp reports its
+        # CUDA probe on start-up: neither is the user's concern on a CPU machine.
+        warnings.filterwarnings("ignore", message="ovphysx is in CPU-only mode", category=RuntimeWarning)
+        with native_output_silenced():
+            import warp
+
+            warp.config.quiet = True
+            warp.init()
         ovphysx.PhysX.set_cpu_mode(True)
         ovstage.population.register_usd_schemas([str(p) for p in physx_schema_paths()])
         ov = SimpleNamespace(ovphysx=ovphysx, ovstage=ovstage, PhysX=ovphysx.PhysX, ObjectScope=ObjectScope,

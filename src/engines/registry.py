@@ -60,7 +60,7 @@ FAMILIES: dict[str, Family] = {f.name: f for f in [
     Family("bullet", "engine", "Bullet through pybullet", "tab:purple", ("pybullet==3.2.7",)),
     Family("fcl", "engine", "FCL through python-fcl", "tab:brown", ("python-fcl==0.7.0.11",)),
     Family("coal", "engine", "coal, the maintained FCL fork", "tab:pink", ("coal==3.0.3",)),
-    Family("physx", "engine", "NVIDIA PhysX 5 through ovphysx", "tab:red",
+    Family("physx", "engine", "NVIDIA PhysX 5 through ovphysx", "navy",
            ("ovphysx==0.7.0.74035321", "physx-usd-schemas==25.11.2.72696984"), "physx"),
     Family("box2d", "engine", "Box2D 2.3 (box2d) and 3.1 (pyb2d3)", "tab:cyan", ("box2d==2.3.10", "pyb2d3==0.11.1")),
     Family("rapier", "engine", "Rapier through rapier3d", "darkgoldenrod", ("rapier3d==0.36.1",)),

@@ -17,6 +17,7 @@ import numpy as np
 import warp as wp
 
 from .base import EMPTY_PAIRS, BroadPhase
+from .quiet import native_output_silenced
 
 wp.config.quiet = True
 GRID_DIM = 128  # hash grid dimensions (cells are hashed into GRID_DIM^2 buckets)
@@ -43,7 +44,8 @@ def _box_pairs(grid: wp.uint64, points: wp.array(dtype=wp.vec3), radii: wp.array
 
 
 def device() -> str:
-    wp.init()
+    with native_output_silenced():  # Warp reports its CUDA probe and its devices on start-up
+        wp.init()
     return "cuda:0" if wp.get_cuda_device_count() > 0 else "cpu"
 
 

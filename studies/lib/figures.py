@@ -71,46 +71,76 @@ def colours(labels: list[str]) -> dict[str, str]:
     return out
 
 
-def _label_offsets(table, ys) -> dict[str, tuple[int, int]]:
-    """Stagger labels of points that share a height (e.g. every engine at 1 candidate per pair)."""
-    offsets = {}
-    band = np.round(np.log10(ys.astype(float)) * 20)
-    for _, names in table.groupby(band).groups.items():
-        ordered = sorted(names, key=lambda n: table.loc[n, "total_ms"])
-        for k, name in enumerate(ordered):
-            offsets[name] = (4, 6 + 11 * (k % 4)) if k % 2 == 0 else (4, -12 - 11 * (k % 4))
-    return offsets
+def error_against_time(summary, path: Path, title: str) -> Path:
+    """Draw compare.png (see error_against_time_figure) and save it."""
+    return save(error_against_time_figure(summary, title), path)
 
 
-def error_against_time(table, path: Path, title: str) -> Path:
-    """compare.png: x, median time per frame; y, candidates per true pair; a red cross for any
-    backend that missed. `table` is compare's summary (one line per backend with times)."""
+def error_against_time_figure(summary, title: str) -> Figure:
+    """compare.png: each backend at its median time per frame (the bar: fastest to slowest
+    repeat) against candidates per true pair (1 = no wasted narrow-phase work), numbered, with
+    the numbers listed beside the plot so that no label covers another. Every backend is there:
+    one without any true pair to divide by, or without candidates, sits on the bottom edge; one
+    that never finished a frame (crashed, timed out, refused) on the right edge; a red X marks
+    missed pairs. `summary` is compare's summary, one line per backend, failed ones included."""
     from .results import missed_total
 
-    fig = new_figure(figsize=(10, 6.5), dpi=120)
-    ax = fig.subplots()
-    ys = table["cand_per_true"].where(np.isfinite(table["cand_per_true"]), 1.0)
-    offsets = _label_offsets(table, ys)
-    missed = missed_total(table) > 0
-    for name, r in table.iterrows():
+    timed = summary[np.isfinite(summary["total_ms"].astype(float))]
+    failed = summary.drop(timed.index)
+    fig = new_figure(figsize=(12, 7), dpi=110)
+    ax, side = fig.subplots(1, 2, gridspec_kw={"width_ratios": [3, 1.15]})
+    side.axis("off")
+    order = list(timed.sort_values("total_ms").index) + list(failed.index)
+    x_max = float(timed["high_ms"].max()) if len(timed) else 1.0
+    x_min = float(timed["low_ms"].min()) if len(timed) else 0.1
+    ratio = timed["cand_per_true"].astype(float)
+    finite = ratio[np.isfinite(ratio) & (ratio > 0)]
+    y_lo, y_hi = (finite.min() / 2, finite.max() * 2) if len(finite) else (0.5, 2.0)
+    missed = missed_total(summary) > 0
+    lines = []
+    for k, name in enumerate(order, start=1):
+        r = summary.loc[name]
+        if name in timed.index:
+            x, y = r["total_ms"], ratio[name] if np.isfinite(ratio[name]) and ratio[name] > 0 else y_lo
+            ax.plot([r["low_ms"], r["high_ms"]], [y, y], color="0.6", lw=1.2, zorder=2)
+            note = f"{r['total_ms']:.3g} ms" + ("" if np.isfinite(ratio[name]) and ratio[name] > 0
+                                                 else ", no true pair to compare with")
+        else:  # no frame: on the right edge, spread down it
+            x = x_max * 3
+            y = y_hi / 1.5 * (y_lo / y_hi) ** (0.8 * (k - len(timed) - 1) / max(len(failed), 1))
+            note = str(r["status"])
         colour = "red" if missed[name] else family_colour(name)
-        marker = "X" if missed[name] else ("s" if r["reports"] == "contacts" else "o")
-        ax.scatter(r["total_ms"], ys[name], s=60, marker=marker, color=colour, zorder=3)
-        ax.annotate(name, (r["total_ms"], ys[name]), textcoords="offset points", xytext=offsets[name],
-                    fontsize=8, arrowprops={"arrowstyle": "-", "lw": 0.4, "color": "0.5"})
+        marker = "X" if missed[name] else ("x" if name not in timed.index else "s" if r["reports"] == "contacts"
+                                           else "o")
+        ax.scatter(x, y, s=70, marker=marker, color=colour, zorder=3)
+        ax.annotate(str(k), (x, y), textcoords="offset points", xytext=(5, 4 if k % 2 else -11), fontsize=7)
+        lines.append((f"{k:>2} {name}", note + ("  MISSED PAIRS" if missed[name] else ""), colour))
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_ylim(ys.min() / 1.6, ys.max() * 1.6)
-    ax.set_xlabel("median time per frame, update + pairs + narrow phase (ms)")
+    ax.set_xlim(x_min / 2, x_max * 6 if len(failed) else x_max * 2)
+    ax.set_ylim(y_lo / 1.3, y_hi)
+    if len(failed):
+        ax.axvline(x_max * 1.7, color="0.7", lw=0.8, ls=":")
+        ax.text(x_max * 3, y_hi / 1.15, "no frame", ha="center", fontsize=7, color="0.4")
+    ax.set_xlabel("median time per frame, update + pairs + narrow phase (ms); bar: fastest to slowest repeat")
     ax.set_ylabel("candidates per truly overlapping pair")
     ax.set_title(title, fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
-    families = sorted({n.split(".")[0] for n in table.index})
-    handles = [Line2D([], [], ls="", marker="o", color=family_colour(f + "."), label=f) for f in families]
-    handles += [
-        Line2D([], [], ls="", marker="o", color="0.4", label="reports overlapping boxes"),
-        Line2D([], [], ls="", marker="s", color="0.4", label="reports contacts (engine's narrow phase ran)"),
-        Line2D([], [], ls="", marker="X", color="red", label="missed pairs"),
-    ]
-    ax.legend(handles=handles, loc="upper left", fontsize=8, framealpha=0.9)
-    return save(fig, path, dpi=120)
+    handles = [Line2D([], [], ls="", marker="o", color="0.4", label="reports overlapping boxes"),
+               Line2D([], [], ls="", marker="s", color="0.4", label="reports contacts (engine's narrow phase ran)"),
+               Line2D([], [], ls="", marker="X", color="red", label="missed pairs"),
+               Line2D([], [], ls="", marker="x", color="0.4", label="no frame finished")]
+    ax.legend(handles=handles, loc="upper left", fontsize=7, framealpha=0.9)
+    rows = sum(1 if len(note) <= 16 else 2 for _, note, _ in lines)
+    step = min(0.97 / max(rows, 1), 0.035)
+    y = 0.98
+    for label, note, colour in lines:
+        side.text(0.0, y, label, fontsize=7, color=colour, va="top", family="monospace", transform=side.transAxes)
+        if len(note) <= 16:  # a time: beside the name
+            side.text(1.0, y, note, fontsize=6, color="0.3", va="top", ha="right", transform=side.transAxes)
+        else:  # why it has no time: under the name
+            y -= step
+            side.text(0.06, y, note[:70] + ("..." if len(note) > 70 else ""), fontsize=5.5, color="0.3", va="top",
+                      transform=side.transAxes)
+        y -= step
+    return fig

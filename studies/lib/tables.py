@@ -55,8 +55,9 @@ def _engine_ms(value: float) -> str:
     return f"{'-':>10}" if pd.isna(value) else f"{value:10.3f}" if value < 100 else f"{value:10.1f}"
 
 
-def format_table(table: pd.DataFrame, baseline: str | None) -> str:
-    """A fixed-width text table sorted by total time per frame."""
+def format_table(table: pd.DataFrame, baseline: str | None, planned: int | None = None) -> str:
+    """A fixed-width text table sorted by total time per frame; a backend stopped before all of
+    its `planned` frames (over its budget, say) is marked with how many it ran."""
     width = max([len("backend"), *map(len, table.index)])
     head = (f"{'backend':<{width}} {'reports':<8} {'update ms':>17} {'pairs ms':>17} {'narrow ms':>17} "
             f"{'total ms':>17} {'engine bp':>10} {'cand/true':>9} {'missed':>6} {'setup s':>7}")
@@ -69,5 +70,7 @@ def format_table(table: pd.DataFrame, baseline: str | None) -> str:
                 + f" {_engine_ms(r['engine_broadphase_ms'])} {r['cand_per_true']:9.2f} {missed:6d} {r['setup_s']:7.2f}")
         if baseline:
             line += f" {r['speedup']:15.1f}x"
+        if r.get("partial") or (planned and r["frames"] < planned):
+            line += f"  <- partial: {int(r['frames'])}" + (f" of {planned}" if planned else "") + " frames"
         lines.append(line + ("  <- MISSED PAIRS" if missed else ""))
     return "\n".join(lines)
