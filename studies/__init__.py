@@ -11,4 +11,5 @@ COMMANDS = {
     "scale": "how each backend's cost per frame grows with n, up to 2^20",
     "bench": "our backends against the speed targets on this machine",
     "tune": "sweep each backend's parameters on a scene; check our defaults",
+    "tradeoff": "error against run time for every setting of every backend, with the Pareto frontier",
 }

@@ -87,10 +87,11 @@ class Entry:
     tuned: bool = False  # the trial is at tuned parameters, not the defaults
     note: str = ""
     job: str = ""  # the key of the job behind the trial, in the results
+    max_error: float = 0.0  # the share of contacts it may miss and still be recommended
 
     @property
     def eligible(self) -> bool:
-        return self.trial.ok and self.trial.missed == 0
+        return self.trial.acceptable(self.max_error)
 
 
 def rank(entries: list[Entry]) -> list[list[Entry]]:
@@ -120,6 +121,10 @@ def verdict(groups: list[list[Entry]], entries: list[Entry], traits: Traits) -> 
     win = top[0]
     lines.append(f"Use {win.backend} ({params_text(win)}): {win.trial.median_ms:.3g} ms per frame "
                  f"(repeats {win.trial.low_ms:.3g} to {win.trial.high_ms:.3g}).")
+    if win.trial.error > 0:
+        lines.append(f"It gives up {win.trial.error:.2g} of the contacts ({win.trial.contacts_missed} of "
+                     f"{win.trial.contacts} missed over {win.trial.frames} frames), within the --max-error "
+                     f"of {win.max_error:g} you allowed.")
     if len(top) > 1:
         others = ", ".join(f"{e.backend} ({e.trial.median_ms:.3g} ms)" for e in top[1:])
         lines.append(f"Tied with it within the run-to-run spread: {others}; any of them will do.")
@@ -129,7 +134,7 @@ def verdict(groups: list[list[Entry]], entries: list[Entry], traits: Traits) -> 
         lines.append(f"Runner-up: {runner.backend} ({params_text(runner)}), {margin:.2f}x the winner's time"
                      + (" (tied)." if runner in top else "."))
     lines.append("Why: " + why(win, runner, traits))
-    flagged = [e for e in entries if e.trial.ok and e.trial.missed]
+    flagged = [e for e in entries if e.trial.ok and e.trial.missed and not e.eligible]
     if flagged:
         lines.append("Never recommended, missed pairs: " + ", ".join(f"{e.backend} ({e.trial.missed} missed)"
                                                                   for e in flagged) + ".")
@@ -222,6 +227,9 @@ def parser() -> Parser:
                    help="aim to finish the whole recommendation within S seconds; backends left when time runs out "
                         "are not tried (default 60)")
     p.add_argument("--no-tune", action="store_true", help="use every backend's default parameters")
+    p.add_argument("--max-error", type=float, default=0.0, metavar="E",
+                   help="recommend the fastest setting that misses at most this share of the true contacts "
+                        "(default 0: none missed; tuning then tries the settings that trade accuracy for speed)")
     add_output_options(p, "recommend")
     return p
 
@@ -230,6 +238,8 @@ def parse(argv: list[str] | None):
     args = parse_checked(parser(), argv)
     if not args.time_limit > 0:
         raise CliError("--time-limit must be positive")
+    if not 0 <= args.max_error < 1:
+        raise CliError("--max-error must be a share of the contacts, 0 <= E < 1")
     return args
 
 
@@ -241,6 +251,7 @@ class Trials:
                  verify: tuple[int, ...] | None = None) -> None:
         self.runner, self.scene, self.frames, self.repeats, self.deadline = runner, scene, frames, repeats, deadline
         self.verify = verify
+        self.max_error = args.max_error
         self.timeout_cap = args.timeout or 120.0
         self.budget_cap = args.budget or float("inf")
 
@@ -266,19 +277,21 @@ class Trials:
         started = time.perf_counter()
         probe = self.run(probe_job)
         if not probe.ok or (self.frames == 1 and self.repeats == 1):
-            return Entry(backend, probe, job=probe_job.key)
+            return Entry(backend, probe, job=probe_job.key, max_error=self.max_error)
         per_frame = max((time.perf_counter() - started) - probe.setup_s, probe.median_ms / 1e3, 1e-6)
         left = self.deadline - time.perf_counter()
         room = max(0.0, 2 * left / share - probe.setup_s)  # a repeat builds the backend anew
         frames = min(self.frames, max(1, int(room / per_frame)))
         repeats = min(self.repeats, max(1, int(room / (frames * per_frame + probe.setup_s))))
         if frames * repeats <= 1:
-            return Entry(backend, probe, job=probe_job.key, note="one frame: no more fitted its share of the time")
+            return Entry(backend, probe, job=probe_job.key, note="one frame: no more fitted its share of the time",
+                         max_error=self.max_error)
         job = self.job(backend, {}, "trial", repeats=repeats, frames=frames, budget=budget, share=share)
         trial = self.run(job)
         if not trial.ok:  # the longer run did not finish in time: its first frame stands
-            return Entry(backend, probe, job=probe_job.key, note=f"one frame: the longer trial {trial.status}")
-        return Entry(backend, trial, job=job.key)
+            return Entry(backend, probe, job=probe_job.key, note=f"one frame: the longer trial {trial.status}",
+                         max_error=self.max_error)
+        return Entry(backend, trial, job=job.key, max_error=self.max_error)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -322,6 +335,7 @@ def main(argv: list[str] | None = None) -> int:
             notes.append(f"Not available here: {', '.join(missing)}.")
         meta = out.meta(scene=scene_columns(traj), traits=vars(traits), frames=frames, repeats=repeats,
                         verified=list(verify) if verify else None, time_limit=args.time_limit,
+                        max_error=args.max_error,
                         unavailable=missing, not_tried=skipped, notes=notes,
                         entries=[{"backend": e.backend, "job": e.job, "tuned": e.tuned, "note": e.note}
                                  for e in entries])
@@ -387,7 +401,8 @@ def report_only(folder: Path) -> int:
         job = Job(e["backend"], json.loads(e["job"])["params"])
         rows = stored.get(e["job"], [])
         outcome = Outcome(e["backend"], rows[-1]["status"] if rows else "not measured", rows)
-        entries.append(Entry(e["backend"], Trial.of(job, outcome), e["tuned"], e["note"]))
+        entries.append(Entry(e["backend"], Trial.of(job, outcome), e["tuned"], e["note"],
+                             max_error=meta.get("max_error", 0.0)))
     finish(folder, entries, meta, Traits(**meta["traits"]))
     return 0
 
@@ -408,7 +423,7 @@ def tune(entries: list[Entry], trials: Trials, deadline: float) -> None:
             return trials.run(trials.job(backend, params, f"tuning {step}", repeats=1, frames=TUNE_FRAMES,
                                          budget=HOPELESS * leader / 1e3))
 
-        found = tune_backend(trials.scene, e.backend, measure, with_default=False)
+        found = tune_backend(trials.scene, e.backend, measure, with_default=False, max_error=e.max_error)
         defaults = engines.backend_class(e.backend).defaults
         same = all(defaults.get(k) == v for k, v in found.params.items())
         if not found.params or same or time.perf_counter() > deadline:
@@ -418,10 +433,10 @@ def tune(entries: list[Entry], trials: Trials, deadline: float) -> None:
         tuned = trials.run(job)
         setting = ", ".join(f"{k}={v}" for k, v in found.params.items())
         # Adopted only when faster beyond the run-to-run spread: otherwise the defaults stand.
-        if tuned.ok and tuned.missed == 0 and tuned.high_ms < e.trial.low_ms:
+        if tuned.acceptable(e.max_error) and tuned.high_ms < e.trial.low_ms:
             e.note = f"tuned; defaults took {e.trial.median_ms:.3g} ms"
             e.trial, e.tuned, e.job = tuned, True, job.key
-        elif tuned.ok and tuned.missed == 0 and tuned.overlaps(e.trial):
+        elif tuned.acceptable(e.max_error) and tuned.overlaps(e.trial):
             e.note = f"tuned setting ({setting}, {tuned.median_ms:.3g} ms) within the spread of the defaults"
         else:
             e.note = f"tuned setting ({setting}) was not faster"

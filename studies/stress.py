@@ -138,9 +138,7 @@ def report(outcomes: pd.DataFrame, max_n: pd.DataFrame, drift: dict, meta: dict,
     if bad.empty:
         lines.append("Nothing: every backend was exact or a superset on every scene.")
     for backend, d in bad.groupby("backend", sort=False):
-        items = "; ".join(f"{r.scene}: {r.outcome}" + (f" ({r.detail})" if r.detail else "") for r in d.itertuples())
-        cause = breaks(backend)
-        lines.append(f"- **{backend}**: {items}." + (f" Why: {cause}" if cause else " Cause not established."))
+        lines.append(f"- **{backend}**: {what_broke(backend, d)}")
     lines += ["", "## Moving scenes: tunneling and the motion itself", "",
               "Tunneled: pairs whose straight paths met between two frames but that the backend never reported as "
               "a candidate, so no narrow phase could catch them. Energy drift is relative; the walls reflect, so "
@@ -166,6 +164,22 @@ def report(outcomes: pd.DataFrame, max_n: pd.DataFrame, drift: dict, meta: dict,
     path = folder / "STRESS.md"
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+def what_broke(backend: str, bad: pd.DataFrame) -> str:
+    """One backend's failures, scenes with the same outcome together, then why: the evidence
+    tests' finding, or the interface's own refusal (its message says why), or that nobody knows."""
+    groups = bad.fillna({"detail": ""}).groupby(["outcome", "detail"], sort=False).scene.agg(list)
+    items = "; ".join(f"{', '.join(scenes)}: {outcome}" + (f" ({detail})" if detail else "")
+                      for (outcome, detail), scenes in groups.items())
+    refused = bad.detail.fillna("").str.startswith(f"ValueError: {backend}:")
+    over_budget = bad.outcome == "skipped"
+    cause = breaks(backend)
+    if cause:
+        return f"{items}. Why: {cause}"
+    if (refused | over_budget).all():
+        return f"{items}. Refused at the interface before the engine could fail, or over the time budget."
+    return f"{items}. Cause not established."
 
 
 def breaks(backend: str) -> str:

@@ -45,6 +45,9 @@ EXACT = [
     ("own.quadtree", {"coherent": False}),
     ("own.bvh", {}),
     ("own.bvh", {"leaf_size": 1}),
+    ("own.verlet", {}),
+    ("own.verlet", {"skin": 0.0}),  # rebuilt whenever anything moves
+    ("own.verlet", {"skin": 50.0}),  # a wide list, rarely rebuilt
 ]
 IDS = [name + "".join(f"-{k}={v}" for k, v in p.items()) for name, p in EXACT]
 
@@ -320,3 +323,45 @@ def test_grid_incremental_rebuilds_into_a_larger_grid_when_the_scene_spreads_out
         cells = len(grid.structure()["cells"])
         grid.validate()
         assert np.array_equal(np.sort(keys(grid.pairs(), 1000)), np.sort(keys(brute_pairs(positions, radii), 1000)))
+
+
+@settings(max_examples=60)
+@given(scene=any_scene, steps=st.lists(st.floats(0.0, 40.0), min_size=1, max_size=8),
+       skin=st.sampled_from([0.0, 0.3, 2.0, 25.0]), fat=st.booleans(), seed=st.integers(0, 2**16))
+def test_verlet_list_is_exact_under_its_rebuild_rule_across_stepped_frames(scene, steps, skin, fat, seed):
+    """Random steps, small and large, teleports among them: the list is rebuilt exactly when an
+    object has moved half the skin, and every frame's pairs are the box overlaps; with `fat`, a
+    superset of them, each within the skin (the fat boxes, built apart, each moved skin / 2 since)."""
+    positions, radii = scene
+    positions, radii = np.asarray(positions, dtype=float).reshape(-1, 2), np.asarray(radii, dtype=float)
+    rng = np.random.default_rng(seed)
+    verlet = engines.create("own.verlet", skin=skin, fat=fat)
+    verlet.reset(positions, radii)
+    for step in steps:
+        positions = positions + rng.uniform(-step, step, positions.shape)
+        verlet.update(positions)
+        got = verlet.pairs()
+        verlet.validate()
+        n = len(positions)
+        assert is_canonical(got, n) is None, is_canonical(got, n)
+        expected = keys(brute_pairs(positions, radii), n)
+        if fat:
+            assert np.setdiff1d(expected, keys(got, n)).size == 0
+            assert np.setdiff1d(keys(got, n), keys(brute_pairs(positions, radii + skin), n)).size == 0
+        else:
+            assert np.array_equal(np.sort(keys(got, n)), expected)
+
+
+def test_verlet_list_rebuilt_every_k_frames_misses_pairs_when_objects_outrun_the_skin():
+    """The approximate setting: measured, not assumed, to lose pairs on fast motion."""
+    traj = simulate(generate("uniform", 400, radius=5.0, speed=3000.0, seed=2), 12)
+    n = traj.scene.n
+    lost = {}
+    for every in (None, 10):
+        verlet = engines.create("own.verlet", skin=1.0, every=every)
+        verlet.reset(traj.positions[0], traj.scene.radii)
+        lost[every] = 0
+        for f in range(1, traj.frames):
+            verlet.update(traj.positions[f])
+            lost[every] += np.setdiff1d(keys(traj.box_pairs[f], n), keys(verlet.pairs(), n)).size
+    assert lost[None] == 0 and lost[10] > 0

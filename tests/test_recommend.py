@@ -67,6 +67,33 @@ def test_end_to_end_on_a_scene_file_flags_a_lossy_backend(tmp_path, monkeypatch,
     assert all(e["backend"] != "test.lossy" for g in ranking for e in g)
 
 
+def test_max_error_admits_a_setting_that_misses_within_it_and_says_what_it_gives_up():
+    def lossy(name, ms, missed):
+        trial = Trial(name, {"every": 5}, "ok", ms, ms, ms, missed, contacts=1000, contacts_missed=missed)
+        return Entry(name, trial, max_error=0.01)
+
+    exact, within, beyond = entry("exact", 2.0, 1.9, 2.1), lossy("within", 1.0, 5), lossy("beyond", 0.5, 50)
+    exact.max_error = 0.01
+    groups = rank([exact, within, beyond])
+    assert [[e.backend for e in g] for g in groups] == [["within"], ["exact"]]
+    traits = measure_traits(simulate(generate("uniform", 100, seed=1), 2))
+    text = "\n".join(verdict(groups, [exact, within, beyond], traits))
+    assert "Use within (every=5)" in text
+    assert "It gives up 0.005 of the contacts (5 of 1000 missed" in text and "--max-error of 0.01" in text
+    assert [[e.backend for e in g] for g in rank([Entry("within", within.trial)])] == []  # the default: 0
+
+
+def test_end_to_end_max_error_ranks_a_backend_that_misses_within_it(tmp_path, monkeypatch, capsys):
+    register(monkeypatch, Lossy)
+    monkeypatch.setitem(Lossy.defaults, "drop", 2)  # two of about 90 contacts per frame
+    out = tmp_path / "rec"
+    assert recommend.main(["--n", "400", "--dist", "clusters", "--radius", "12", "--backends", "own.grid,test.lossy",
+                           "--no-tune", "--frames", "3", "--repeat", "2", "--max-error", "0.2", "--out", str(out)]) == 0
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["max_error"] == 0.2
+    assert {e["backend"] for g in meta["ranking"] for e in g} == {"own.grid", "test.lossy"}
+
+
 def test_the_time_limit_stops_trying_and_says_so(tmp_path, capsys):
     assert recommend.main(["--n", "300", "--backends", "own.*", "--no-tune", "--time-limit", "3.5",
                            "--frames", "2", "--repeat", "2", "--out", str(tmp_path)]) == 0

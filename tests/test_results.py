@@ -218,7 +218,7 @@ def test_a_failed_run_leaves_one_row_with_its_status(tmp_path, monkeypatch, caps
 
 
 def test_memory_running_out_in_the_study_itself_is_one_line(tmp_path, monkeypatch, capsys):
-    def too_big(scene, frames):
+    def too_big(scene, frames, **_):
         raise MemoryError("Unable to allocate 371. GiB for an array with shape (3, 10000000, 2)")
 
     monkeypatch.setattr(runner_module, "simulate", too_big)

@@ -39,6 +39,7 @@ class Limits:
     coordinate: float = math.inf  # largest |x| or |y| of a centre
     radius: float = math.inf  # largest radius
     zero_radius: bool = True  # whether radius 0 is admitted
+    min_radius: float = 0.0  # smallest positive radius
     objects: int | None = None  # most objects
     why: str = ""
 
@@ -54,12 +55,19 @@ class Limits:
         if radii is not None and len(radii):
             if not self.zero_radius and radii.min() == 0.0:
                 return f"radius 0 (object {int(radii.argmin())}), which it cannot create"
+            positive = np.where(radii > 0, radii, np.inf)
+            if self.min_radius > 0 and positive.min() < self.min_radius:
+                return (f"radius {positive.min():.3g} (object {int(positive.argmin())}), under its limit of "
+                        f"{self.min_radius:.3g}")
             if radii.max() > self.radius:
                 return f"radius {radii.max():.3g} (object {int(radii.argmax())}), over its limit of {self.radius:.3g}"
         return None
 
 
 NO_LIMITS = Limits()
+# The `breaks` of engines that store positions in float32 (evidence: test_engines' float32 test).
+FLOAT32_BREAKS = ("It stores positions in float32: pairs that touch by less than float32 resolves at their "
+                  "coordinates are lost (at 1e6 its values are 1/16 apart, at 1e9 64 apart).")
 
 
 def hash_cells_problem(positions: np.ndarray, radii: np.ndarray, cell: float, most: int, dims: int = 2,

@@ -16,7 +16,7 @@ import Box2D
 import numpy as np
 import pyb2d3
 
-from .base import EMPTY_PAIRS, BroadPhase, Limits
+from .base import EMPTY_PAIRS, FLOAT32_BREAKS, BroadPhase, Limits
 from .pairs import canonical
 
 FRAME_DT = 1.0 / 60.0
@@ -28,6 +28,7 @@ class Box2DV2(BroadPhase):
     the pairs of overlapping fat boxes kept as contacts between steps."""
 
     name, method = "box2d.v2", "tree"
+    breaks = FLOAT32_BREAKS
     exact = False
     reports = "boxes"
     limits = Limits(coordinate=FLOAT32_MAX, radius=FLOAT32_MAX, why="Box2D 2.3's binding converts every value to "
@@ -63,6 +64,7 @@ class Box2DV3(BroadPhase):
     """Box2D 3.1's dynamic tree, driven through batch calls; the pairs are its touching contacts."""
 
     name, method = "box2d.v3", "tree"
+    breaks = FLOAT32_BREAKS
     exact = False
     reports = "contacts"
 

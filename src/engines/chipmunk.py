@@ -95,7 +95,7 @@ class _Chipmunk(BroadPhase):
         its cache of arbiters (kept pairs) for each removal: 21 s at n = 65536, over a minute at
         131072. One step in which no pair may collide (all shapes in one filter group) empties
         the cache first: 5.8 s at 65536 (the removals still cost more the more shapes remain)."""
-        if self._space is not None and self._space.shapes:
+        if getattr(self, "_space", None) is not None and self._space.shapes:
             no_pairs = pymunk.ShapeFilter(group=1)
             for shape in self._space.shapes:
                 shape.filter = no_pairs

@@ -8,8 +8,12 @@ geoms (`d.contact.geom[:ncon]`), read as one array: "contacts". MuJoCo times its
 (`mjTIMER_COL_BROAD`): that is the engine's broad-phase time.
 
 Limits, refused before they are hit: body ids are 16 bits (at most 65533 bodies), and
-`mj_collision` takes about 2 n^2 bytes of the model's arena for its broad phase, which must be
-reserved when the model is compiled (the arena here is sized from n; at n = 40000, 3.2 GB).
+`mj_collision` takes about 4 n^2 bytes of the model's arena for its broad phase (measured: 4.01
+to 4.09 n^2 from n = 1024 to 8192: its candidate pairs, n^2 / 2 ints, and as much again to sort
+them), which must be reserved when the model is compiled; at n = 40000, 6.4 GB. The contacts
+take the arena too: should a frame have more than the room left for them, MuJoCo drops the rest
+with a warning (or stops with an error), so the model is compiled again with twice the room and
+the frame redone.
 """
 
 from __future__ import annotations
@@ -22,10 +26,14 @@ import numpy as np
 from .base import EMPTY_PAIRS, BroadPhase, Limits
 
 MAX_BODIES = 65533  # mjModel counts bodies (the world included) in 16 bits, less a few reserved ids
-ARENA_BYTES_PER_BODY_PAIR = 2.0  # the broad phase's scratch: n^2 / 2 ints
-ARENA_BASE = 64 << 20
+ARENA_BYTES_PER_BODY_PAIR = 4.1  # the broad phase's scratch, in bytes per n^2 (measured, above)
+CONTACT_ROOM = 64 << 20  # the first room for contacts (about 100 000 of them) and the rest of mjData
 # Refuse a model whose arena would take more than this share of the machine's memory.
 MEMORY_SHARE = 0.5
+
+
+def _ignore(message: str) -> None:
+    pass
 
 
 def machine_memory() -> int:
@@ -42,35 +50,48 @@ class MujocoSap(BroadPhase):
                     why="MuJoCo's spheres need a positive size, and it numbers bodies in 16 bits")
 
     def _reset(self, positions, radii):
+        self._positions, self._radii = positions, radii
+        self._compile(CONTACT_ROOM)
+
+    def _compile(self, contact_room: int) -> None:
         n = self.n
-        arena = int(ARENA_BYTES_PER_BODY_PAIR * (n + 1) ** 2 + ARENA_BASE)
+        arena = int(ARENA_BYTES_PER_BODY_PAIR * (n + 1) ** 2 + contact_room)
         if arena > MEMORY_SHARE * machine_memory():
             raise ValueError(f"{self.name}: n = {n} needs a {arena / 2**30:.1f} GB arena for MuJoCo's broad phase, "
                              f"over {MEMORY_SHARE:.0%} of this machine's memory")
         spec = mujoco.MjSpec()
         spec.option.gravity = [0.0, 0.0, 0.0]
         spec.memory = arena
-        for (x, y), r in zip(positions.tolist(), radii.tolist()):
+        for (x, y), r in zip(self._positions.tolist(), self._radii.tolist()):
             # Mass and inertia given, not derived from the sphere: a tiny sphere would be too light
             # for MuJoCo ("mass and inertia of moving bodies must be larger than mjMINVAL").
             body = spec.worldbody.add_body(pos=[x, y, 0.0], mass=1.0, inertia=[1.0, 1.0, 1.0], explicitinertial=True)
             body.add_freejoint()
             body.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[r, 0.0, 0.0])
+        self._contact_room = contact_room
         self._model = spec.compile()
         self._data = mujoco.MjData(self._model)
         self._qpos = self._data.qpos.reshape(n, 7) if n else np.zeros((0, 7))
         self._qpos[:, 3] = 1.0  # unit quaternion
         self._broad = self._data.timer[mujoco.mjtTimer.mjTIMER_COL_BROAD]
+        self._full = self._data.warning[mujoco.mjtWarning.mjWARN_CONTACTFULL]
         self._engine_s = None
-        self._update(positions)
+        self._update(self._positions)
 
     def _update(self, positions):
+        self._positions = positions
         self._qpos[:, 0:2] = positions
         mujoco.mj_kinematics(self._model, self._data)
 
     def _pairs(self):
-        before = self._broad.duration
-        mujoco.mj_collision(self._model, self._data)
+        # MuJoCo would print its warnings and append them to MUJOCO_LOG.TXT in the working
+        # directory; the one it can give here (contacts dropped) is handled below.
+        previous = mujoco.get_mju_user_warning()
+        mujoco.set_mju_user_warning(_ignore)
+        try:
+            before = self._collide()
+        finally:
+            mujoco.set_mju_user_warning(previous)
         self._engine_s = self._broad.duration - before
         ncon = self._data.ncon
         self._stats = {"contacts": int(ncon)}
@@ -78,6 +99,21 @@ class MujocoSap(BroadPhase):
             return EMPTY_PAIRS.copy()
         geoms = self._data.contact.geom[:ncon].astype(np.int64)  # geom k is object k
         return np.column_stack([geoms.min(axis=1), geoms.max(axis=1)])
+
+    def _collide(self) -> float:
+        """mj_collision, again with more room while contacts do not fit; the broad-phase timer's
+        reading before the call that fit."""
+        while True:
+            dropped, before = self._full.number, self._broad.duration
+            try:
+                mujoco.mj_collision(self._model, self._data)
+            except mujoco.FatalError as exc:  # its narrow phase's scratch did not fit either
+                if "out of memory" not in str(exc):
+                    raise
+            else:
+                if self._full.number == dropped:
+                    return before
+            self._compile(2 * self._contact_room)  # twice the room, and the frame again
 
     def engine_broadphase_s(self) -> float | None:
         return self._engine_s

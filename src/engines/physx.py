@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .base import EMPTY_PAIRS, BroadPhase, Limits
+from .base import EMPTY_PAIRS, FLOAT32_BREAKS, BroadPhase, Limits
 from .quiet import native_output_silenced
 from .pairs import canonical
 
@@ -86,8 +86,13 @@ def scene_usda(positions: np.ndarray, radii: np.ndarray, broadphase: str) -> str
 class _PhysX(BroadPhase):
     exact = False
     reports = "contacts"
+    breaks = FLOAT32_BREAKS
     # A sphere of radius 0 is an invalid shape to PhysX: it leaves the object out, and its pairs are lost.
-    limits = Limits(zero_radius=False, why="PhysX cannot create a sphere of radius 0")
+    # At its default density a sphere's inverse inertia, 1 / (1.7e3 r^5), overflows float32 below
+    # r = 4.4e-9 (measured: 4e-9 fails, 4.5e-9 runs); PhysX then rejects the body's pose and the step fails.
+    limits = Limits(zero_radius=False, min_radius=1e-8,
+                    why="PhysX cannot create a sphere of radius 0, and under r = 4.4e-9 its inverse inertia "
+                        "overflows float32")
     broadphase = ""  # physxScene:broadphaseType
 
     def _reset(self, positions, radii):
@@ -98,11 +103,14 @@ class _PhysX(BroadPhase):
         usda = self._folder / "scene.usda"
         usda.write_text(scene_usda(positions, radii, self.broadphase))
         ov = _start_process()
+        self._contacts = self._query = self._stage = None
         self._physx = ov.PhysX()
         self._stage = ov.ovstage.Stage(f"{self.name}-{id(self)}")
         ov.ovstage.population.open_usd(self._stage, str(usda), ordinal=1, domains=ov.ovstage.PopulationDomain.ALL)
         self._stage.advance_write_floor(ordinal=1).wait()
-        self._physx.wait_task(self._physx.attach_ovstage(self._stage, read_ordinal=1))
+        with native_output_silenced():  # physx.pabp: "GPU broadphase requires a CUDA context manager; falling
+            # back to ePABP", every time: the fallback this backend exists to measure (docs/engines.md)
+            self._physx.wait_task(self._physx.attach_ovstage(self._stage, read_ordinal=1))
         self._physx.wait_all()
         self._query = self._physx.query(ov.SimObjectType.RIGID_BODY, scope=ov.ObjectScope.ALL).wait()
         self._bind_contacts(max(64, 16 * self.n))
@@ -184,14 +192,19 @@ class _PhysX(BroadPhase):
         return canonical(objects[:, 0], objects[:, 1])
 
     def close(self):
+        """Release what reset() built, however far it got."""
         physx, self._physx = getattr(self, "_physx", None), None
         if physx is None:
             return
-        self._contacts.destroy()
-        self._contacts = None
-        self._query.close().wait()
-        physx.wait_task(physx.detach_ovstage())
-        self._stage.destroy()
+        for name, release in (("_contacts", lambda c: c.destroy()), ("_query", lambda q: q.close().wait())):
+            if getattr(self, name, None) is not None:
+                release(getattr(self, name))
+                setattr(self, name, None)
+        stage = getattr(self, "_stage", None)
+        if stage is not None:
+            if physx.is_stage_attached(stage):
+                physx.wait_task(physx.detach_ovstage())
+            stage.destroy()
         physx.destroy()
         shutil.rmtree(self._folder, ignore_errors=True)
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import rapier3d
 
-from .base import EMPTY_PAIRS, BroadPhase
+from .base import EMPTY_PAIRS, FLOAT32_BREAKS, BroadPhase
 from .knobs import Knob, fixed
 
 
@@ -23,6 +23,7 @@ class RapierBvh(BroadPhase):
     """Rapier's BVH broad phase; `prediction` is the distance by which it enlarges boxes."""
 
     name, method = "rapier.bvh", "tree"
+    breaks = FLOAT32_BREAKS
     exact = False
     reports = "boxes"
     defaults = {"prediction": 0.002}

@@ -80,6 +80,7 @@ BACKENDS: dict[str, str] = {
     "own.grid_incremental": "own.grid_incremental:IncrementalGrid",
     "own.quadtree": "own.quadtree:Quadtree",
     "own.bvh": "own.bvh:LinearBvh",
+    "own.verlet": "own.verlet:VerletList",
     "own.grid_swept": "own.swept:SweptGrid",
     "own.sap_swept": "own.swept:SweptSap",
     "essay.sap": "own.essay.sap:EssaySweepAndPrune",

@@ -69,4 +69,4 @@ def warn_unavailable(chosen: list[str]) -> dict[str, str]:
 
 def command_line(study: str, argv: list[str] | None) -> str:
     """The command as the user typed it, for meta.json."""
-    return f"python -m studies.{study} " + " ".join(sys.argv[1:] if argv is None else argv)
+    return " ".join([f"python -m studies.{study}", *(sys.argv[1:] if argv is None else argv)])

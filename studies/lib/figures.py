@@ -71,6 +71,18 @@ def colours(labels: list[str]) -> dict[str, str]:
     return out
 
 
+def pareto_front(table, time: str, cost: str):
+    """The rows that no other row beats on both `time` and `cost` (lower is better), by time."""
+    done = table[np.isfinite(table[time].astype(float)) & np.isfinite(table[cost].astype(float))]
+    done = done.sort_values([time, cost])
+    keep, best = [], np.inf
+    for index, value in done[cost].items():
+        if value < best:
+            keep.append(index)
+            best = value
+    return done.loc[keep]
+
+
 def error_against_time(summary, path: Path, title: str) -> Path:
     """Draw compare.png (see error_against_time_figure) and save it."""
     return save(error_against_time_figure(summary, title), path)
@@ -115,6 +127,10 @@ def error_against_time_figure(summary, title: str) -> Figure:
         ax.scatter(x, y, s=70, marker=marker, color=colour, zorder=3)
         ax.annotate(str(k), (x, y), textcoords="offset points", xytext=(5, 4 if k % 2 else -11), fontsize=7)
         lines.append((f"{k:>2} {name}", note + ("  MISSED PAIRS" if missed[name] else ""), colour))
+    front = pareto_front(timed.loc[~missed[timed.index]], "total_ms", "cand_per_true")
+    if len(front) > 1:
+        ax.step(front["total_ms"], front["cand_per_true"], where="post", color="k", lw=0.8, zorder=1,
+                label="frontier")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlim(x_min / 2, x_max * 6 if len(failed) else x_max * 2)
@@ -129,7 +145,8 @@ def error_against_time_figure(summary, title: str) -> Figure:
     handles = [Line2D([], [], ls="", marker="o", color="0.4", label="reports overlapping boxes"),
                Line2D([], [], ls="", marker="s", color="0.4", label="reports contacts (engine's narrow phase ran)"),
                Line2D([], [], ls="", marker="X", color="red", label="missed pairs"),
-               Line2D([], [], ls="", marker="x", color="0.4", label="no frame finished")]
+               Line2D([], [], ls="", marker="x", color="0.4", label="no frame finished"),
+               Line2D([], [], color="k", lw=0.8, label="frontier: nothing both faster and leaner")]
     ax.legend(handles=handles, loc="upper left", fontsize=7, framealpha=0.9)
     rows = sum(1 if len(note) <= 16 else 2 for _, note, _ in lines)
     step = min(0.97 / max(rows, 1), 0.035)

@@ -127,6 +127,7 @@ def measure(job: Job, traj: Trajectory, repeat: int, ready: Callable[[], None] |
     """
     radii = traj.scene.radii
     backend = engines.create(job.backend, **job.params)
+    failed = True
     try:
         start = time.perf_counter()
         backend.reset(traj.positions[0], radii)
@@ -178,13 +179,23 @@ def measure(job: Job, traj: Trajectory, repeat: int, ready: Callable[[], None] |
         peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         for row in rows:
             row["tunneled"], row["peak_rss_mb"] = tunneled, peak
+        failed = False
         return rows
     finally:
-        backend.close()
+        try:
+            backend.close()
+        except Exception:
+            if not failed:
+                raise  # else the error that stopped the run is the one to report, not its cleanup's
 
 
 # The trajectory of the current run; forked children inherit it without pickling.
 _TRAJECTORY: Trajectory | None = None
+
+
+def memory_budget(job: Job) -> str:
+    return (f"budget {job.memory_mb:g} MB" if job.memory_mb is not None
+            else "no budget set: the machine's memory ran out")
 
 
 def _child(job: Job, conn) -> None:
@@ -207,12 +218,15 @@ def _child(job: Job, conn) -> None:
     except InvalidOutput as exc:
         conn.send(("failed", f"invalid output: {exc}"))
     except MemoryError:
-        budget = (f"budget {job.memory_mb:g} MB" if job.memory_mb is not None
-                  else "no budget set: the machine's memory ran out")
-        conn.send(("failed", f"out of memory ({budget})"))
+        conn.send(("failed", f"out of memory ({memory_budget(job)})"))
     except Exception as exc:  # an engine error is a result of the study, not a crash of it
         last = traceback.extract_tb(exc.__traceback__)[-1]
-        conn.send(("failed", f"error: {type(exc).__name__}: {exc} (at {last.name})".replace("\n", " ")))
+        message = f"{type(exc).__name__}: {exc} (at {last.name})".replace("\n", " ")
+        # C++ engines report an allocation the memory budget refused as their own error.
+        if "std::bad_alloc" in message:
+            conn.send(("failed", f"out of memory ({memory_budget(job)}): {message}"))
+        else:
+            conn.send(("failed", f"error: {message}"))
     finally:
         conn.close()
 

@@ -44,7 +44,7 @@ def add_scene_options(parser: argparse.ArgumentParser, n: int = 2048) -> None:
     g.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     g.add_argument("--box", type=float, metavar="SIDE",
                    help="side of the square box (default: the box in which the objects' boxes cover "
-                        f"{ESSAY_COVERAGE:.1%} of the area, as in the essay's scene)")
+                        f"{ESSAY_COVERAGE * 100:.1f}%% of the area, as in the essay's scene)")
     add_scene_file_option(g)
 
 

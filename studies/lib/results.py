@@ -241,7 +241,8 @@ def summarise(rows: pd.DataFrame, by: list[str], first: Iterable[str] = (), stat
     (`update_ms`, `update_iqr_ms`, ... `total_ms`), the quartiles of the total, `low_ms` and
     `high_ms` (the fastest and slowest repeat's median total), medians of the pair counts, the
     mean false positives and candidates beyond those promised per frame (`extra_per_frame`),
-    candidates per true pair over the verified frames (`verified` counts them), misses summed (`box_missed` stays empty for backends
+    candidates per true pair over the verified frames (`verified` counts them), misses summed
+    (and `contacts`, the true pairs summed; `worst_missed_share`, the worst frame's missed share) (`box_missed` stays empty for backends
     that report contacts), the slowest setup, the peak memory, the tunneling count, and with
     `stats`, the median of each of the backend's counters (`stat_<name>`). `status` is "ok" or
     the group's last other status; `partial` says that a group stopped early but kept rows.
@@ -283,6 +284,9 @@ def summarise(rows: pd.DataFrame, by: list[str], first: Iterable[str] = (), stat
     table["cand_per_true"] = candidates / true.where(true > 0)
     table["missed"] = g["missed"].sum()
     table["box_missed"] = g["box_missed"].sum(min_count=1)
+    table["contacts"] = true  # truly overlapping pairs over the verified frames
+    share = (ok["missed"] / ok["true_pairs"].where(ok["true_pairs"] > 0)).fillna(0.0)
+    table["worst_missed_share"] = share.groupby([ok[c] for c in by], sort=False, dropna=False).max()
     table["setup_s"] = g["t_setup_s"].max()  # the first repeat's: only it pays for JIT compilation
     table["peak_mb"] = g["peak_rss_mb"].max()
     table["tunneled"] = g["tunneled"].last()

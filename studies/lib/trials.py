@@ -36,6 +36,18 @@ class Trial:
     frame_ms: float = float("nan")  # its fastest frame measured, even in a run stopped after it
     frames: int = 0  # timed frames measured (every repeat)
     setup_s: float = float("nan")  # building it and its warm-up frame
+    contacts: int = 0  # truly overlapping pairs over the checked frames
+    contacts_missed: int = 0  # of those, absent from the candidates
+
+    @property
+    def error(self) -> float:
+        """The share of true contacts it missed (0 where there were none to miss)."""
+        return self.contacts_missed / self.contacts if self.contacts else 0.0
+
+    def acceptable(self, max_error: float = 0.0) -> bool:
+        """Finished, and within the error allowed: nothing missed at all (boxes included) when no
+        error is allowed, else at most that share of the contacts."""
+        return self.ok and (self.missed == 0 if max_error <= 0 else self.error <= max_error)
 
     @property
     def ok(self) -> bool:
@@ -61,6 +73,7 @@ class Trial:
         trial.median_ms, trial.low_ms, trial.high_ms = line.total_ms, line.low_ms, line.high_ms
         trial.missed = int(missed_total(line.to_frame().T).iloc[0])
         trial.described, trial.last_stats = line.params, ok[-1]["stats"]
+        trial.contacts, trial.contacts_missed = int(line.contacts), int(line.missed)
         return trial
 
 

@@ -24,8 +24,9 @@ class Sweep:
     held: dict[str, Any]  # the other parameters during this sweep
     points: list[tuple[Any, Trial]]
 
-    def best(self) -> tuple[Any, Trial] | None:
-        good = [(v, t) for v, t in self.points if t.ok and t.missed == 0]
+    def best(self, max_error: float = 0.0) -> tuple[Any, Trial] | None:
+        """The fastest value whose trial finished within the error allowed (none missed by default)."""
+        good = [(v, t) for v, t in self.points if t.acceptable(max_error)]
         return min(good, key=lambda vt: vt[1].median_ms) if good else None
 
 
@@ -62,7 +63,7 @@ def tunable(names: list[str]) -> list[str]:
 
 
 def tune_backend(scene: Scene, backend: str, measure: Measure, knobs: tuple[Knob, ...] | None = None,
-                 with_default: bool = True) -> Tuned:
+                 with_default: bool = True, max_error: float = 0.0) -> Tuned:
     """Sweep every knob of `backend` (its class's `sweeps`, or `knobs`) on `scene`, measuring each
     point with `measure`. With `with_default`, the default parameters are measured too (Tuned.default)."""
     params: dict[str, Any] = {}
@@ -74,7 +75,7 @@ def tune_backend(scene: Scene, backend: str, measure: Measure, knobs: tuple[Knob
             points.append((value, measure({**params, knob.param: value}, knob.param)))
         sweep = Sweep(knob, dict(params), points)
         sweeps.append(sweep)
-        found = sweep.best()
+        found = sweep.best(max_error)
         if found:
             params[knob.param] = found[0]
             best = found[1]
