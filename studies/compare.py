@@ -11,7 +11,6 @@ import sys
 import time
 from pathlib import Path
 
-from tqdm import tqdm
 
 import engines
 from scenes import coverage
@@ -22,7 +21,8 @@ from .lib.harness import Job, scene_columns
 from .lib.options import (add_backends_option, add_output_options, add_quick_option, add_scene_options,
                           add_trial_options, parse_checked, scene_from_args)
 from .lib.output import Output, read_meta
-from .lib.results import RowWriter, missed_total, ok_lines, read_rows, summarise
+from .lib.pool import Pool
+from .lib.results import RowWriter, cpu_models_note, missed_total, ok_lines, read_rows, summarise
 from .lib.runner import Runner
 from .lib.tables import add_speedup, format_table, ours_against_engines
 
@@ -67,22 +67,20 @@ def main(argv: list[str] | None = None) -> int:
         unavailable = warn_unavailable(chosen)
         runnable = [n for n in chosen if n not in unavailable]
         writer = RowWriter(out.path, args.resume)
-        runner = Runner(writer, out)
+        runner = Runner(writer, out, pool=Pool.from_args(args))
         start = time.perf_counter()
         traj = runner.trajectory(scene, args.frames + 1)  # frame 0 is every backend's warm-up
         print(f"scene {scene.name}: n={scene.n}, radii {scene.radius_range[0]:g}..{scene.radius_range[1]:g}, "
               f"box {scene.box} ({coverage(scene.radii, scene.box):.0%} of it covered by the objects' boxes), "
               f"{args.frames} timed frames x {args.repeat} repeats (trajectory and exact pairs computed once in "
               f"{time.perf_counter() - start:.1f} s)")
-        out.meta(scene={**scene_columns(traj), "box": scene.box, "frames": args.frames, "repeats": args.repeat},
+        out.meta(scene={**scene_columns(traj.scene), "box": scene.box, "frames": args.frames, "repeats": args.repeat},
                  unavailable=unavailable)
-        outcomes = {}
-        with tqdm(runnable, desc="backends", unit="backend", file=sys.stderr) as bar:
-            for backend in bar:
-                bar.set_postfix_str(backend)
-                job = Job(backend, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout,
-                          memory_mb=args.memory, scene=scene, frames=args.frames)
-                outcomes[backend] = runner.run(job).status
+        jobs = [Job(backend, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout,
+                    memory_mb=args.memory, scene=scene, frames=args.frames) for backend in runnable]
+        with runner:
+            done = runner.run_all(jobs, desc="backends")
+        outcomes = {job.backend: outcome.status for job, outcome in zip(jobs, done)}
         writer.finish()
         out.meta(outcomes=outcomes)
     return report(out.path, args.check)
@@ -107,6 +105,9 @@ def report(folder: Path, check: bool) -> int:
     headline = ours_against_engines(table) if not table.empty else None
     if headline:
         print(headline)
+    mixed = cpu_models_note(rows)
+    if mixed:
+        print(mixed)
     print("times: median ±interquartile range over all timed frames and repeats; engine bp: the engine's own measure "
           "of its broad phase (ms), where it reports one;\ncand/true: candidates per truly overlapping pair (1 = no "
           "extra work); missed: truly overlapping pairs (and, for 'boxes' backends,\noverlapping boxes) absent from the "

@@ -22,6 +22,7 @@ from .lib.essay_plan import Plan, Run, fixed_runs, grid_search_run
 from .lib.harness import Job
 from .lib.options import add_output_options, add_quick_option, add_trial_options, parse_checked
 from .lib.output import Output, docs_folder, read_meta
+from .lib.pool import Pool
 from .lib.results import RowWriter
 from .lib.runner import Runner
 
@@ -127,8 +128,9 @@ def main(argv: list[str] | None = None) -> int:
             missing = warn_unavailable(plan.engines)
             writer = RowWriter(output.path, args.resume)
             output.meta(plan=vars(plan), unavailable=missing)
-            runner = EssayRunner(Runner(writer, output), plan, args)
-            best_p = measure(runner, plan)
+            with Runner(writer, output, pool=Pool.from_args(args)) as jobs:
+                runner = EssayRunner(jobs, plan, args)
+                best_p = measure(runner, plan)
             writer.finish()
             output.meta(best_p=best_p, outcomes={k: v for k, v in runner.outcomes.items() if v != "ok"})
     from .lib.essay_report import write_report

@@ -25,6 +25,7 @@ from .lib.harness import Job, Outcome, scene_columns
 from .lib.options import (add_backends_option, add_output_options, add_scene_options, add_trial_options,
                           parse_checked, scene_from_args)
 from .lib.output import Output, read_meta, write_json
+from .lib.pool import Pool
 from .lib.results import RowWriter, stored_runs
 from .lib.runner import Runner
 from .lib.traits import Traits, measure_traits
@@ -306,7 +307,7 @@ def main(argv: list[str] | None = None) -> int:
         start = time.perf_counter()
         deadline = start + args.time_limit - REPORT_S
         writer = RowWriter(out.path, args.resume)
-        runner = Runner(writer, out)
+        runner = Runner(writer, out, pool=Pool.from_args(args))
         frames, repeats, notes, verify = plan_trials(runner, scene, args, len(backends))
         traj = runner.trajectory(scene, frames + 1, verify)
         traits = measure_traits(traj)
@@ -333,7 +334,7 @@ def main(argv: list[str] | None = None) -> int:
             notes.append(f"Not tried, the time limit of {args.time_limit:g} s ran out: {', '.join(skipped)}.")
         if missing:
             notes.append(f"Not available here: {', '.join(missing)}.")
-        meta = out.meta(scene=scene_columns(traj), traits=vars(traits), frames=frames, repeats=repeats,
+        meta = out.meta(scene=scene_columns(traj.scene), traits=vars(traits), frames=frames, repeats=repeats,
                         verified=list(verify) if verify else None, time_limit=args.time_limit,
                         max_error=args.max_error,
                         unavailable=missing, not_tried=skipped, notes=notes,

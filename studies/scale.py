@@ -19,7 +19,6 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from tqdm import tqdm
 
 import engines
 from scenes.generate import at_essay_density
@@ -30,6 +29,7 @@ from .lib.harness import Job
 from .lib.options import (add_backends_option, add_output_options, add_quick_option, add_trial_options,
                           parse_checked)
 from .lib.output import Output, docs_folder, read_meta, write_json
+from .lib.pool import Pool
 from .lib.results import RowWriter, ok_lines, read_rows, summarise
 from .lib.runner import Runner
 
@@ -158,6 +158,11 @@ def report(medians: pd.DataFrame, exponents: dict, stopped: dict, meta: dict, fo
              f"{meta['machine']['cores']} cores); regenerate with `python -m studies.scale`.", ""]
     if meta["unavailable"]:
         lines += [f"**Not run, their bindings are missing: {', '.join(meta['unavailable'])}.**", ""]
+    workers = meta.get("cluster", {}).get("workers", {})
+    if len(set(workers.values())) > 1:
+        models = ", ".join(f"{host}: {cpu}" for host, cpu in sorted(workers.items()))
+        lines += [f"**Timed on {len(set(workers.values()))} CPU models ({models}): a ratio between backends that "
+                  "ran on different models compares the machines as well as the backends.**", ""]
     if meta.get("interrupted"):
         lines += [f"**From an interrupted run: its rows end at {meta['interrupted']}, and larger sizes of that "
                   "distribution were not measured.**", ""]
@@ -221,20 +226,12 @@ def measure(args, chosen: list[str], runner: Runner) -> None:
     """Every backend at doubling n; a backend that does not finish a size (over the budget, a
     crash, a timeout) is not run at larger sizes."""
     sizes = [2**k for k in range(6, args.max_log2_n + 1)]
-    with tqdm(total=len(DISTS) * len(sizes), desc="scale", unit="size", file=sys.stderr) as bar:
-        for dist in DISTS:
-            active = list(chosen)
-            for n in sizes:
-                if not active:
-                    break
-                scene = at_essay_density(dist, n)
-                for backend in list(active):
-                    bar.set_postfix_str(f"{dist} n={n} {backend}")
-                    job = Job(backend, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout,
-                              memory_mb=args.memory, scene=scene, frames=args.frames)
-                    if runner.run(job).status != "ok":
-                        active.remove(backend)
-                bar.update(1)
+    scenes = {(dist, n): at_essay_density(dist, n) for dist in DISTS for n in sizes}
+    # One chain per scene kind and backend, smallest n first; the chains run side by side.
+    chains = [[Job(backend, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout, memory_mb=args.memory,
+                   scene=scenes[dist, n], frames=args.frames) for n in sizes]
+              for dist in DISTS for backend in chosen]
+    runner.run_chains(chains, desc="scale")
 
 
 def summarise_sizes(rows: pd.DataFrame) -> tuple[pd.DataFrame, dict[tuple[str, str], str]]:
@@ -258,7 +255,8 @@ def main(argv: list[str] | None = None) -> int:
         missing = warn_unavailable(chosen)
         writer = RowWriter(out.path, args.resume)
         out.meta(unavailable=missing)
-        measure(args, [b for b in chosen if b not in missing], Runner(writer, out))
+        with Runner(writer, out, pool=Pool.from_args(args)) as runner:
+            measure(args, [b for b in chosen if b not in missing], runner)
         writer.finish()
         meta = out.meta(compile=compile_times())
     # Only a run of every backend over every size replaces the report in docs/.

@@ -18,7 +18,6 @@ import numpy as np
 import pandas as pd
 from matplotlib.colors import ListedColormap
 from matplotlib.patches import Rectangle
-from tqdm import tqdm
 
 import engines
 from scenes import Scene
@@ -32,6 +31,7 @@ from .lib.harness import Job
 from .lib.options import (add_backends_option, add_output_options, add_quick_option, add_scene_file_option,
                           add_trial_options, parse_checked)
 from .lib.output import Output, docs_folder, read_meta
+from .lib.pool import Pool
 from .lib.results import RowWriter, missed_total, read_rows, summarise
 from .lib.runner import Runner
 
@@ -72,15 +72,14 @@ def outcomes_table(rows: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(out, columns=["scene", "backend", "outcome", "detail", "ms", "tunneled", "peak_mb"])
 
 
-def largest_n(runner: Runner, backend: str, args) -> None:
-    """Double n (uniform scenes at the essay's density) while one frame stays within the budget."""
-    n = 1024
-    while n <= args.max_n:
-        job = Job(backend, budget_s=args.budget, timeout_s=args.timeout, memory_mb=args.memory,
-                  scene=at_essay_density("uniform", n), frames=1, tag={"experiment": LARGEST_N})
-        if runner.run(job).status != "ok":
-            return
-        n *= 2
+def largest_n(runner: Runner, backends: list[str], args) -> None:
+    """Per backend, double n (uniform scenes at the essay's density) while one frame stays within
+    the budget."""
+    sizes = [n for n in (1024 << k for k in range(40)) if n <= args.max_n]
+    scenes = {n: at_essay_density("uniform", n) for n in sizes}
+    runner.run_chains([[Job(backend, budget_s=args.budget, timeout_s=args.timeout, memory_mb=args.memory,
+                            scene=scenes[n], frames=1, tag={"experiment": LARGEST_N}) for n in sizes]
+                       for backend in backends], desc="largest n")
 
 
 def largest_n_table(rows: pd.DataFrame, backends: list[str], cap: int, budget: float) -> pd.DataFrame:
@@ -275,23 +274,20 @@ def main(argv: list[str] | None = None) -> int:
         missing = warn_unavailable(backends)
         backends = [b for b in backends if b not in missing]
         writer = RowWriter(out.path, args.resume)
-        runner = Runner(writer, out)
+        runner = Runner(writer, out, pool=Pool.from_args(args))
         out.meta(frames=args.frames, timeout_s=args.timeout, memory_mb=args.memory, budget_s=args.budget,
                  max_n=args.max_n, backends=backends, unavailable=missing)
         drift = {}
-        with tqdm(total=len(scenes) * len(backends), desc="stress", unit="run", file=sys.stderr) as bar:
-            for scene in scenes:
+        with runner:
+            for scene in scenes:  # a scene at a time: its trajectory is computed once, here
                 if scene.moves:
                     traj = runner.trajectory(scene, args.frames + 1)
                     drift[scene.name] = {**traj.drift(), "swept_contacts": int(len(traj.swept_contacts))}
-                for backend in backends:
-                    bar.set_postfix_str(f"{scene.name} {backend}")
-                    runner.run(Job(backend, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout,
-                                   memory_mb=args.memory, count_tunneling=scene.moves, scene=scene, frames=args.frames,
-                                   tag={"experiment": SCENES}))
-                    bar.update(1)
-        for backend in tqdm(backends, desc="largest n", unit="backend", file=sys.stderr):
-            largest_n(runner, backend, args)
+                runner.run_all([Job(backend, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout,
+                                    memory_mb=args.memory, count_tunneling=scene.moves, scene=scene,
+                                    frames=args.frames, tag={"experiment": SCENES}) for backend in backends],
+                               desc=f"stress: {scene.name}")
+            largest_n(runner, backends, args)
         writer.finish()
         meta = out.meta(drift=drift)
     rows, _ = read_rows(out.path)

@@ -22,7 +22,6 @@ from typing import Any
 import numpy as np
 import pandas as pd
 from matplotlib.lines import Line2D
-from tqdm import tqdm
 
 import engines
 from scenes import Scene, generate
@@ -33,6 +32,7 @@ from .lib.harness import Job
 from .lib.options import (add_backends_option, add_output_options, add_quick_option, add_trial_options,
                           parse_checked)
 from .lib.output import Output, docs_folder, read_meta, write_json
+from .lib.pool import Pool
 from .lib.results import RowWriter, read_rows, summarise
 from .lib.runner import Runner
 
@@ -193,15 +193,15 @@ def main(argv: list[str] | None = None) -> int:
         missing = warn_unavailable(chosen)
         backends = [b for b in chosen if b not in missing]
         writer = RowWriter(out.path, args.resume)
-        runner = Runner(writer, out)
         swept = {}
-        for name, scene in scenes(args.quick).items():
-            swept[name] = int(len(runner.trajectory(scene, args.frames + 1).swept_contacts))
-            jobs = [(b, label, params) for b in backends for label, params in settings(b, scene)]
-            for backend, label, params in tqdm(jobs, desc=f"tradeoff {name}", unit="setting", file=sys.stderr):
-                runner.run(Job(backend, params, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout,
-                               memory_mb=args.memory, count_tunneling=True, scene=scene, frames=args.frames,
-                               tag={"experiment": name, "label": label}))
+        with Runner(writer, out, pool=Pool.from_args(args)) as runner:
+            for name, scene in scenes(args.quick).items():
+                swept[name] = int(len(runner.trajectory(scene, args.frames + 1).swept_contacts))
+                runner.run_all([Job(backend, params, repeats=args.repeat, budget_s=args.budget,
+                                    timeout_s=args.timeout, memory_mb=args.memory, count_tunneling=True, scene=scene,
+                                    frames=args.frames, tag={"experiment": name, "label": label})
+                                for backend in backends for label, params in settings(backend, scene)],
+                               desc=f"tradeoff {name}")
         writer.finish()
         meta = out.meta(unavailable=missing, swept_contacts=swept, full=args.backends == "*" and not args.quick)
     return finish(out.path, meta, args)

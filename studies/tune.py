@@ -30,6 +30,7 @@ from .lib.figures import new_figure, save
 from .lib.options import (add_backends_option, add_output_options, add_quick_option, add_scene_options,
                           add_trial_options, parse_checked, scene_from_args)
 from .lib.output import Output, docs_folder
+from .lib.pool import Pool
 from .lib.results import RowWriter, read_rows, stored_runs, summarise
 from .lib.runner import Runner
 from .lib.trials import run_trial, warm_up
@@ -299,7 +300,8 @@ def main(argv: list[str] | None = None) -> int:
         return study(args, argv, Runner(replay=stored_runs(Path(args.out))), Path(args.out))
     with Output(args.out, "tune", command_line("tune", argv), args.resume) as out:
         writer = RowWriter(out.path, args.resume)
-        code = study(args, argv, Runner(writer, out), out.path)
+        with Runner(writer, out, pool=Pool.from_args(args)) as runner:
+            code = study(args, argv, runner, out.path)
         writer.finish()
     rows, _ = read_rows(out.path)
     points_table(rows).to_csv(out.path / "tune.csv", index=False)

@@ -3,17 +3,24 @@
 Each backend runs in a forked child process that inherits the trajectory, so an engine that
 segfaults or hangs is recorded as that backend's outcome ("crashed: signal 11", "timeout after
 120 s") and the study goes on. Rows come back after every repeat, so nothing measured is lost.
+The fork may happen on any thread of a process that runs other jobs beside it (a Dask worker):
+it waits for numba's compiler lock, and the child dies with the thread that started it.
 """
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import faulthandler
 import gc
 import hashlib
 import json
 import multiprocessing as mp
 import resource
+import os
 import signal
+import sys
+import threading
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -189,17 +196,31 @@ def measure(job: Job, traj: Trajectory, repeat: int, ready: Callable[[], None] |
                 raise  # else the error that stopped the run is the one to report, not its cleanup's
 
 
-# The trajectory of the current run; forked children inherit it without pickling.
-_TRAJECTORY: Trajectory | None = None
-
-
 def memory_budget(job: Job) -> str:
     return (f"budget {job.memory_mb:g} MB" if job.memory_mb is not None
             else "no budget set: the machine's memory ran out")
 
 
-def _child(job: Job, conn) -> None:
+PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent(parent_pid: int) -> None:
+    """Ask the kernel to kill this child when the thread that forked it ends (a worker killed
+    mid-job must not leave its job running), and leave at once if that already happened."""
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    except (OSError, AttributeError):  # not Linux: the parent's timeout still applies
+        pass
+    if os.getppid() != parent_pid:
+        os._exit(1)
+
+
+def _child(job: Job, traj: Trajectory, conn, parent_pid: int) -> None:
     """Child process: send ("rows", rows) per repeat, then ("done", None) or ("failed", message)."""
+    _die_with_parent(parent_pid)
+    # Another thread of the parent may have held the streams' locks at the fork: fresh ones.
+    sys.stdout = open(1, "w", buffering=1, closefd=False)
+    sys.stderr = open(2, "w", buffering=1, closefd=False)
     faulthandler.disable()  # a crash is recorded by its signal; an inherited traceback dump is noise
     if job.memory_mb is not None:
         # On top of what the fork already maps (interpreter, numba, engines).
@@ -207,7 +228,7 @@ def _child(job: Job, conn) -> None:
         resource.setrlimit(resource.RLIMIT_AS, (mapped + int(job.memory_mb * 2**20), resource.RLIM_INFINITY))
     try:
         for r in range(job.repeats):
-            rows = measure(job, _TRAJECTORY, r, (lambda: conn.send(("ready", None))) if r == 0 else None)
+            rows = measure(job, traj, r, (lambda: conn.send(("ready", None))) if r == 0 else None)
             conn.send(("rows", rows))
             if rows and rows[-1]["status"] != "ok":  # over budget: no further repeats
                 # The repeats before it stand: say so, or a table row would contradict its note.
@@ -237,16 +258,35 @@ class Outcome:
     status: str  # "ok", "skipped: ...", "error: ...", "crashed: signal N", "timeout after S s"
     rows: list[dict[str, Any]]
     resumed: bool = False  # read back from an earlier run's results, not measured now
+    host: str = ""  # the machine that ran it, and its CPU model
+    cpu: str = ""
 
 
-def run_isolated(job: Job, traj: Trajectory, on_rows: Callable[[list[dict]], None] | None = None) -> Outcome:
-    """Run `job` in a forked child; rows are passed to `on_rows` as each repeat finishes."""
-    global _TRAJECTORY
-    _TRAJECTORY = traj
+@contextlib.contextmanager
+def _children_allowed():
+    """multiprocessing refuses children to a daemonic process, which a Dask worker under its nanny
+    is; our child dies with its parent anyway (_die_with_parent), which is what the rule is for."""
+    config = mp.current_process()._config
+    daemonic = config.get("daemon", False)
+    config["daemon"] = False
+    try:
+        yield
+    finally:
+        config["daemon"] = daemonic
+
+
+def run_isolated(job: Job, traj: Trajectory, on_rows: Callable[[list[dict]], None] | None = None,
+                 stop: threading.Event | None = None) -> Outcome:
+    """Run `job` in a forked child; rows are passed to `on_rows` as each repeat finishes. Setting
+    `stop` ends the child and the job ("stopped")."""
+    from numba.core.compiler_lock import global_compiler_lock
+
     ctx = mp.get_context("fork")
     parent, child = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_child, args=(job, child), daemon=True)
-    proc.start()
+    # The child inherits the trajectory through the fork, never pickled.
+    proc = ctx.Process(target=_child, args=(job, traj, child, os.getpid()), daemon=True)
+    with global_compiler_lock, _children_allowed():  # a child forked while another thread compiles would hang
+        proc.start()
     child.close()
     rows: list[dict] = []
     status = None
@@ -262,6 +302,9 @@ def run_isolated(job: Job, traj: Trajectory, on_rows: Callable[[list[dict]], Non
                 break
             if now >= deadline:
                 status = f"timeout after {job.timeout_s:g} s"
+                break
+            if stop is not None and stop.is_set():
+                status = "stopped: the study was stopped"
                 break
             if not parent.poll(min((setup_deadline or deadline) - now, 0.5)):
                 continue
@@ -280,7 +323,7 @@ def run_isolated(job: Job, traj: Trajectory, on_rows: Callable[[list[dict]], Non
             else:
                 status = "ok" if kind == "done" else payload
     finally:  # a timeout, a setup over its limit, or the study stopping: the child goes too
-        if status is None or status.startswith(("timeout", "skipped: building")):
+        if status is None or status.startswith(("timeout", "skipped: building", "stopped")):
             proc.kill()
         proc.join(timeout=5)
         parent.close()
@@ -293,9 +336,8 @@ def _crash_status(code: int | None) -> str:
     return f"crashed: exit status {code}"
 
 
-def scene_columns(traj: Trajectory) -> dict[str, Any]:
+def scene_columns(s: Scene) -> dict[str, Any]:
     """The columns that describe the scene, the same on every row of a run."""
-    s = traj.scene
     r_min, r_max = s.radius_range
     return {"scene": s.name, "dist": s.meta.get("dist", ""), "n": s.n, "radius_min": r_min, "radius_max": r_max,
             "speed": s.meta.get("speed", ""), "seed": s.meta.get("seed", "")}

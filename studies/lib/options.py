@@ -29,6 +29,7 @@ from scenes import DISTRIBUTIONS, ESSAY_COVERAGE, Scene, generate
 from scenes.io import load_scene
 
 from .cli import CliError
+from .pool import add_cluster_options, check_cluster_options
 
 TRIAL_OPTIONS = ("frames", "repeat", "budget", "timeout", "memory")
 
@@ -124,6 +125,7 @@ def add_output_options(parser: argparse.ArgumentParser, study: str, report_dir: 
     if report_dir:
         g.add_argument("--report-dir", metavar="DIR",
                        help=f"where the report and its figures go (default {report_dir})")
+    add_cluster_options(parser)
 
 
 def add_quick_option(parser: argparse.ArgumentParser, what: str, **settings) -> None:
@@ -142,6 +144,7 @@ def parse_checked(parser: argparse.ArgumentParser, argv: list[str] | None) -> ar
     check_trial_options(args)
     if hasattr(args, "resume"):
         check_output_options(args)
+        check_cluster_options(args)
     return args
 
 

@@ -30,7 +30,7 @@ COLUMNS = [
     "backend", "params", "experiment", "label", "scene", "dist", "n", "radius_min", "radius_max", "speed", "seed",
     "repeat", "frame", "t_update_s", "t_pairs_s", "t_narrow_s", "t_total_s", "t_engine_broadphase_s", "candidates",
     "true_pairs", "missed", "false_positives", "box_pairs", "box_missed", "reports", "t_setup_s", "status", "stats",
-    "tunneled", "peak_rss_mb", "job",
+    "tunneled", "peak_rss_mb", "host", "cpu", "job",
 ]
 STAGES = ["update", "pairs", "narrow", "total"]
 PARTIAL, FINAL = "results.partial.csv", "results.csv"
@@ -154,7 +154,8 @@ def load_runs(source: Path, columns: list[str] = COLUMNS) -> tuple[Runs, set[str
     if cut < len(data):
         notes.append(f"dropped a torn last record ({len(data) - cut} bytes)")
     header, *records = list(csv.reader(io.StringIO(data[:cut].decode("utf-8", errors="replace"), newline="")))
-    if header != columns:
+    # An earlier version's file may lack columns added since (they read as empty), never hold others.
+    if not set(header) <= set(columns) or "job" not in header:
         raise CliError(f"{source} has other columns than this version writes; resume into a new --out")
     if records and len(records[-1]) != len(header):
         notes.append("dropped an incomplete last record")
@@ -168,6 +169,17 @@ def load_runs(source: Path, columns: list[str] = COLUMNS) -> tuple[Runs, set[str
     if unfinished:
         notes.append(f"dropped the rows of {len(unfinished)} unfinished run(s); they are measured again")
     return by_job, unfinished, notes
+
+
+def cpu_models_note(rows: pd.DataFrame) -> str:
+    """A warning when the rows were timed on more than one CPU model (a cluster of unlike machines):
+    a ratio between backends timed on different models compares the machines too. "" otherwise."""
+    if "cpu" not in rows or rows.cpu.dropna().nunique() <= 1:
+        return ""
+    models = "; ".join(f"{cpu}: {', '.join(sorted(d.backend.unique()))}"
+                       for cpu, d in rows.dropna(subset=["cpu"]).groupby("cpu"))
+    return (f"NOTE: these timings come from {rows.cpu.dropna().nunique()} CPU models ({models}); a ratio between "
+            "backends timed on different models compares the machines as well as the backends")
 
 
 def stored_runs(folder: Path) -> dict[str, list[dict[str, Any]]]:

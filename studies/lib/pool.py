@@ -1,0 +1,208 @@
+"""Where the jobs run: a Dask cluster, by default one inside this process.
+
+Every study hands its jobs to a Pool. With no option it is a LocalCluster in this process running
+one job at a time (`--jobs N`: N at once, at most one per core, since timings must not share a
+core); `--scheduler tcp://HOST:PORT` sends them to a cluster started with `dask scheduler` and
+`dask worker`. On either, a job runs its backend in a forked child of the worker (harness.py), so
+a crash or a hang is the job's outcome, never the worker's death. A worker that dies mid-job
+(killed, out of memory) costs that job one retry elsewhere (the scheduler's allowed failures: 1
+here; set DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES=1 where a cluster is started), then the
+job is recorded as failed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import atexit
+import logging
+import os
+import platform
+import threading
+import uuid
+import warnings
+from typing import Any
+
+from .cli import CliError
+from .harness import Job, Outcome, run_isolated
+from .output import cpu_model
+from . import trajectories
+
+JOB_STARTED = "broadphase-job-started"  # the event each start of a job logs on the scheduler
+CONNECT_TIMEOUT_S = 5
+# Backends that time themselves on every core: on this machine they run with no job beside them.
+ALL_CORES_BACKENDS = ("own.sap_parallel",)
+
+# Stop signals of the jobs under way in this process, by job key: a task cannot carry an event
+# (Dask serialises every task, even in-process), so a local job looks its signal up here.
+_stops: dict[str, threading.Event] = {}
+_local: dict[tuple[int, bool], Any] = {}  # (jobs at once, dashboard) -> the in-process cluster, reused
+
+
+def add_cluster_options(parser: argparse.ArgumentParser) -> None:
+    g = parser.add_argument_group("cluster")
+    g.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                   help="run the jobs on this Dask cluster, started with `dask scheduler` and `dask worker` "
+                        "(default: on this machine)")
+    g.add_argument("--jobs", type=int, metavar="N",
+                   help="jobs run at once on this machine (default 1; at most one per core, so that timings do "
+                        "not share a core)")
+    g.add_argument("--dashboard", action="store_true", help="print the address of Dask's dashboard of the run")
+
+
+def check_cluster_options(args: argparse.Namespace) -> None:
+    cores = os.cpu_count() or 1
+    if args.jobs is not None and args.scheduler:
+        raise CliError("--jobs is for this machine; on a cluster each worker thread runs one job at a time")
+    if args.jobs is not None and not 1 <= args.jobs <= cores:
+        raise CliError(f"--jobs must be 1..{cores} (the cores of this machine), got {args.jobs}")
+
+
+def uses_all_cores(job: Job) -> bool:
+    return job.backend in ALL_CORES_BACKENDS or bool(job.params.get("parallel"))
+
+
+def execute(job: Job, run_id: str) -> Outcome:
+    """On a worker: the job's scene stepped (or kept from the worker's last jobs), the job run in
+    an isolated child, its outcome with where it ran."""
+    try:
+        from distributed import get_worker
+
+        get_worker().log_event(JOB_STARTED, {"run": run_id, "job": job.key})
+    except ValueError:  # not on a worker (the job was run directly)
+        pass
+    traj = trajectories.trajectory(job.scene, job.frames + 1, job.verify)
+    outcome = run_isolated(job, traj, stop=_stops.get(job.key))
+    outcome.host, outcome.cpu = platform.node(), cpu_model()
+    return outcome
+
+
+class Pool:
+    """A Dask client, connected on first use; `describe()` is what meta.json records of it."""
+
+    def __init__(self, scheduler: str | None = None, jobs: int | None = None, dashboard: bool = False) -> None:
+        self.scheduler, self.jobs, self.dashboard = scheduler, jobs or 1, dashboard
+        self.run_id = uuid.uuid4().hex
+        self.workers: dict[str, str] = {}  # host -> CPU model, of the workers that ran a job
+        self.retried: list[str] = []  # jobs started more than once (a worker died running them)
+        self._client = None
+        self._started: list[str] = []  # keys of this pool's jobs whose stop signal is set up
+        if scheduler:
+            self.client()  # an unreachable address is said now, not after the scenes are computed
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> "Pool":
+        return cls(getattr(args, "scheduler", None), getattr(args, "jobs", None), getattr(args, "dashboard", False))
+
+    @property
+    def local(self) -> bool:
+        return not self.scheduler
+
+    def client(self):
+        if self._client is None:
+            self._client = self._remote() if self.scheduler else _local_client(self.jobs, self.dashboard)
+            if self.dashboard:
+                print(f"Dask dashboard: {self._client.dashboard_link}", flush=True)
+        return self._client
+
+    def _remote(self):
+        from distributed import Client
+
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                return Client(self.scheduler, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as exc:
+            reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise CliError(f"cannot reach the Dask scheduler at {self.scheduler}: {reason}") from None
+
+    def submit(self, job: Job, priority: int):
+        """Start the job on the cluster (higher priority first); a future of its Outcome."""
+        if self.local:  # a remote job cannot share an event with this process
+            _stops[job.key] = threading.Event()
+            self._started.append(job.key)
+        # Locally a job that times itself on every core takes every slot: it runs alone.
+        resources = {"cores": self.jobs if uses_all_cores(job) else 1} if self.local else None
+        return self.client().submit(execute, job, self.run_id, key=f"job-{uuid.uuid4().hex}", pure=False,
+                                    priority=priority, resources=resources)
+
+    def ran(self, job: Job, outcome: Outcome) -> None:
+        """Note where a finished job ran."""
+        _stops.pop(job.key, None)
+        if outcome.host:
+            self.workers[outcome.host] = outcome.cpu
+
+    def stop(self, futures) -> None:
+        """End the jobs under way (local ones at once; remote ones are cancelled where not started)."""
+        for key in self._started:
+            if key in _stops:
+                _stops[key].set()
+        if self._client is not None and futures:
+            from distributed import wait
+
+            try:
+                wait(list(futures), timeout=10)
+            except Exception:  # stopping anyway: what is not done now is cancelled
+                pass
+            self._client.cancel(list(futures))
+        for key in self._started:
+            _stops.pop(key, None)
+        self._started.clear()
+
+    def note_retries(self) -> None:
+        """Which of this run's jobs the scheduler started more than once."""
+        if self._client is None:
+            return
+        starts: dict[str, int] = {}
+        for _, event in self._client.get_events(JOB_STARTED):
+            if event.get("run") == self.run_id:
+                starts[event["job"]] = starts.get(event["job"], 0) + 1
+        self.retried = sorted(k for k, count in starts.items() if count > 1)
+
+    def at_once(self) -> int:
+        """How many jobs run side by side."""
+        if self.local:
+            return self.jobs
+        info = self.client().scheduler_info()
+        return sum(w.get("nthreads", 1) for w in info.get("workers", {}).values())
+
+    def describe(self) -> dict[str, Any]:
+        return {"scheduler": self.scheduler or "this machine (an in-process Dask LocalCluster)",
+                "jobs_at_once": self.at_once() if self._client is not None or self.local else None,
+                "workers": dict(self.workers), "retried": list(self.retried)}
+
+    def close(self) -> None:
+        if self._client is not None and not self.local:
+            self._client.close()
+        self._client = None
+
+
+def _local_client(jobs: int, dashboard: bool):
+    """The in-process cluster running `jobs` at once, started once and shared by every study run in
+    this process (tests run many). One worker, one thread per job at once, and a "cores" resource
+    so a job that times itself on every core runs alone."""
+    if (jobs, dashboard) not in _local:
+        import dask
+        from distributed import Client, LocalCluster
+
+        dask.config.set({"distributed.scheduler.allowed-failures": 1})
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            # The jobs hold their thread for seconds by design: the event loop's warnings about it
+            # are silenced with the rest below errors.
+            cluster = LocalCluster(n_workers=1, threads_per_worker=jobs, processes=False, resources={"cores": jobs},
+                                   dashboard_address=":0" if dashboard else None, silence_logs=logging.ERROR)
+        if not _local:
+            atexit.register(_close_local)
+        _local[jobs, dashboard] = Client(cluster, set_as_default=False)
+        trajectories.keep(max(j for j, _ in _local))
+    return _local[jobs, dashboard]
+
+
+def _close_local() -> None:
+    """At exit: the in-process clusters closed quietly (the streams their logs went to may be gone)."""
+    logging.getLogger("distributed").setLevel(logging.CRITICAL)
+    for client in _local.values():
+        cluster = client.cluster
+        client.close()
+        cluster.close()
+    _local.clear()
