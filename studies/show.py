@@ -13,6 +13,7 @@ import sys
 from matplotlib.animation import FuncAnimation, PillowWriter
 
 import engines
+from own.small import SmallScenes
 from scenes.motion import simulate
 
 from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli
@@ -66,6 +67,8 @@ class Stepper:
 
     def __init__(self, backend, traj) -> None:
         self.backend, self.traj = backend, traj
+        if isinstance(backend, SmallScenes):  # drawing the structure is the point, however small the scene
+            backend.small_scene_n = 0
         self.backend.reset(traj.positions[0], traj.scene.radii)
 
     def draw(self, fig, f: int, label: str) -> dict[str, int]:

@@ -11,6 +11,7 @@ import engines
 from engines.pairs import is_canonical, keys
 from own import grid_incremental
 from own.brute import brute_pairs
+from own.small import SmallScenes
 from scenes import generate
 from scenes.motion import simulate
 from scenes.stress import STRESS_SCENES
@@ -50,6 +51,15 @@ EXACT = [
     ("own.verlet", {"skin": 50.0}),  # a wide list, rarely rebuilt
 ]
 IDS = [name + "".join(f"-{k}={v}" for k, v in p.items()) for name, p in EXACT]
+
+
+@pytest.fixture(autouse=True, scope="module")
+def structures_at_every_n():
+    """Here the structures are tested, at every n: small scenes would otherwise take the one-call
+    sweep (own/small.py, tested on its own in test_small_scenes.py)."""
+    kept, SmallScenes.small_scene_n = SmallScenes.small_scene_n, 0
+    yield
+    SmallScenes.small_scene_n = kept
 
 
 def assert_exact(name, params, positions, radii):

@@ -10,7 +10,6 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from own.parallel import threads
 from studies.scale import growth_exponent, ours_against_engines_per_n
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -75,17 +74,22 @@ def test_scale_study_quick(tmp_path):
     assert "From an interrupted run" in (out / "SCALE.md").read_text()
 
 
-def test_bench_quick_prints_the_targets():
+def test_bench_quick_prints_the_targets_with_the_floor():
     done = subprocess.run([sys.executable, "-m", "studies.bench", "--quick", "--frames", "2", "--seconds", "0.05"],
                           cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
-    lines = [line.split() for line in done.stdout.splitlines()[1:]]
-    assert [(line[1], line[3]) for line in lines] == [("own.grid", "1"), ("own.sap", "1"), ("own.quadtree", "1"),
-                                                      ("own.sap", str(threads()))]
-    assert [line[2] for line in lines][-1] == "own.sap_parallel"
+    table, targets = done.stdout.split("\n\n")
+    lines = [line.split() for line in table.splitlines()[1:]]
+    assert [(line[0], line[1], line[2], line[4]) for line in lines] == [
+        ("2048", "uniform", family, "1") for family in ("own.grid", "own.sap", "own.quadtree")]
     for line in lines:
-        fastest, median_pass = float(line[4]), float(line[7])
-        assert 0 < fastest <= median_pass and line[6].endswith("x") and float(line[8]) > 0 and float(line[9]) > 0
+        measured, floor, multiple, per_pair, median_pass = map(float, (line[5], line[6], line[7][:-1], line[8],
+                                                                      line[9]))
+        assert 0 < floor < measured <= median_pass and float(line[10]) > 0 and float(line[11]) > 0
+        assert multiple == pytest.approx(measured / floor, rel=0.05, abs=0.1) and per_pair > 0
+    verdict = targets.splitlines()[1]
+    assert "2048 uniform" in " ".join(verdict.split()) and "one thread target 0.0200 ms" in verdict
+    assert verdict.endswith(": met") or "NOT MET" in verdict
 
 
 def test_bench_coherence_sets_each_sorted_structure_from_scratch_beside_repaired():

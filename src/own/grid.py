@@ -30,6 +30,7 @@ from engines.base import BroadPhase
 from engines.knobs import Knob, mean_diameter, sizes
 
 from .common import PairCollector, centre_extents, emit
+from .small import SmallScenes
 
 # The grid has at most this many cells per object (cells are enlarged to fit), so tiny radii in a
 # huge box cannot allocate an unbounded grid. The cap should rarely bind at useful densities: at
@@ -375,7 +376,7 @@ GRID_CELL = Knob("cell", sizes(lambda s: default_cell(s.radii) or mean_diameter(
                  "requested cell size")
 
 
-class CellLayout(BroadPhase):
+class CellLayout(SmallScenes, BroadPhase):
     """What the grids share: the `p` and `cell` parameters, checked, the layout they start, and
     the cells for drawing. Give `p` for p x p cells over the extent (the essay's parameter) or
     `cell` for a cell size; with neither, a cell is one diameter of the largest object, but at

@@ -28,6 +28,7 @@ from engines.knobs import Knob, fixed
 from .common import PairCollector, gather, insertion_sort, scan_columns
 from .morton import bit_length, interleave
 from .radix import radix_sort
+from .small import SmallScenes
 
 # Keys are (Morton code of the cell, padded to depth D) << LEVEL_BITS | depth: 2 D + 5 bits.
 LEVEL_BITS = 5
@@ -212,7 +213,7 @@ def quadtree_pairs(order, box, nodes, bounds, buf):
     return count, tests, visited
 
 
-class Quadtree(BroadPhase):
+class Quadtree(SmallScenes, BroadPhase):
     """Region quadtree over the boxes, rebuilt every frame.
 
     A node splits when its subtree holds more than `capacity` objects, it is shallower than

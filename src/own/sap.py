@@ -11,6 +11,7 @@ from engines.knobs import Knob, fixed
 from .common import PairCollector, emit, gather, insertion_sort
 from .parallel import ChunkedPairCollector
 from .radix import radix_argsort, sortable_bits
+from .small import SmallScenes
 
 AXES = ("x", "y", "auto")
 SWEEPS = ("auto", "plain", "sparse")
@@ -246,7 +247,7 @@ def sap_sweep_parallel(order, s_lo, s_hi, o_lo, o_hi, bounds32, ramp, bufs):
     return counts, axis_hits, crowded
 
 
-class SweepAndPrune(BroadPhase):
+class SweepAndPrune(SmallScenes, BroadPhase):
     """Sweep and prune; `axis` is "x" (the essay), "y" or "auto" (largest variance of the centres).
 
     Emits only pairs whose boxes overlap on both axes. Cost grows with the number of pairs that
