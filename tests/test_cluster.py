@@ -145,3 +145,16 @@ def test_an_unreachable_scheduler_is_one_line_and_exit_2():
 def test_bad_cluster_options_are_refused(argv, problem, capsys):
     assert scale_cli(["--quick", *argv]) == 2
     assert problem in capsys.readouterr().err
+
+
+def test_a_resumed_grid_runs_only_the_sizes_not_on_disk(tmp_path, monkeypatch):
+    """Every chain's first jobs are on disk: the runner still starts the cluster for the rest."""
+    monkeypatch.setattr(scale, "compile_times", lambda: {"error": "not measured in this test"})
+    out = tmp_path / "run"
+    grid = ["--quick", "--backends", "own.grid,scipy.kdtree", "--out", str(out)]
+    assert scale_cli([*grid, "--max-log2-n", "7"]) == 0
+    first = measured(out)
+    assert scale_cli([*grid, "--max-log2-n", "8", "--resume"]) == 0
+    rows = measured(out)
+    assert sorted(rows.n.unique()) == [64, 128, 256] and not rows.duplicated(["job", "repeat", "frame"]).any()
+    pd.testing.assert_frame_equal(rows[rows.n < 256].reset_index(drop=True), first)

@@ -113,20 +113,26 @@ class Runner:
                     # Earlier in the given order runs first: a scene's jobs stay together.
                     future = self.pool.submit(job, priority=-(len(results[c]) * len(chains) + c))
                     running[future] = (c, job)
-                    completed.add(future)
+                    waiting().add(future)
                     return
                 record(c, job, known)
                 if not go_on(known):
                     return
 
+        def waiting():
+            """The futures under way, as they complete (started with the first job submitted: a
+            grid found whole on disk needs no cluster)."""
+            nonlocal completed
+            if completed is None:
+                from distributed import as_completed
+
+                completed = as_completed(loop=self.pool.client().loop)
+            return completed
+
         try:
             for job in (j for chain in chains for j in chain):
                 if job.scene is None:
                     raise ValueError(f"job {job.backend} has no scene to run on")
-            if any(self._known(chain[0]) is None for chain in chains if chain):
-                from distributed import as_completed
-
-                completed = as_completed(loop=self.pool.client().loop)
             for c in range(len(chains)):
                 advance(c)
             for future in completed or ():
