@@ -24,6 +24,31 @@ SHAPES = ("box", "circle")
 MAX_HASH_CELLS_PER_OBJECT = 1 << 20  # a million cells, walked every frame
 MAX_HASH_CELL_COORDINATE = 2.0**30
 STEP_DT = 1.0 / 60.0  # kinematic bodies have zero velocity, so dt only feeds Chipmunk's bookkeeping
+HASH_SWEEPS = (Knob("dim", sizes(mean_diameter, HASH_CELL_FACTORS), "hash cell size dim"),
+               Knob("count", lambda s: [max(1000, int(f * s.n)) for f in (1, 3, 10, 30)], "hash table size count"))
+
+
+class HashCellGuard:
+    """What both backends of Chipmunk's spatial hash (in a Space and driven directly) share: the
+    cell size checked, and the guard against the inputs it hangs on, at reset and every update.
+    Put it before the backend's base class."""
+
+    def _set_dim(self, dim) -> None:
+        if not (np.isfinite(dim) and dim > 0):
+            raise ValueError(f"{self.name}: dim must be a positive size, got {dim!r}")
+        self._dim = float(dim)
+
+    def _check_cells(self, positions: np.ndarray) -> None:
+        """Chipmunk's hash hangs (it walks every cell of a box, and its int cell indices overflow)
+        instead of failing: the study found it looping for minutes at coordinates of 1e12."""
+        problem = hash_cells_problem(positions, self.radii, self._dim, MAX_HASH_CELLS_PER_OBJECT,
+                                     reach=MAX_HASH_CELL_COORDINATE)
+        if problem:
+            raise ValueError(f"{self.name}: {problem} (Chipmunk's spatial hash; `dim` sets the cell)")
+
+    def _update(self, positions):
+        self._check_cells(positions)
+        super()._update(positions)
 
 
 class _Chipmunk(BroadPhase):
@@ -111,7 +136,7 @@ class ChipmunkTree(_Chipmunk):
     method = "tree"
 
 
-class ChipmunkHash(_Chipmunk):
+class ChipmunkHash(HashCellGuard, _Chipmunk):
     """Chipmunk's spatial hash, rebuilt every step with tight boxes.
 
     pymunk's advice: `dim` about the average object size, `count` about 10x the objects. The
@@ -121,8 +146,7 @@ class ChipmunkHash(_Chipmunk):
     name = "chipmunk.hash"
     method = "hash"
     defaults = {"shape": "box", "dim": None, "count": None}
-    sweeps = (Knob("dim", sizes(mean_diameter, HASH_CELL_FACTORS), "hash cell size dim"),
-              Knob("count", lambda s: [max(1000, int(f * s.n)) for f in (1, 3, 10, 30)], "hash table size count"))
+    sweeps = HASH_SWEEPS
 
     def _configure(self, space, positions, radii):
         dim = self.params["dim"]
@@ -131,21 +155,7 @@ class ChipmunkHash(_Chipmunk):
             spacing = float(np.ptp(positions, axis=0).max()) / np.sqrt(self.n) if self.n else 0.0
             dim = 4.0 * mean_r or spacing or 1.0  # zero radii: the mean spacing of the objects
         count = self.params["count"] if self.params["count"] is not None else max(1000, 10 * self.n)
-        if not (np.isfinite(dim) and dim > 0):
-            raise ValueError(f"{self.name}: dim must be a positive size, got {dim!r}")
-        self._stats = {"dim": float(dim), "count": int(count)}
-        self._dim = float(dim)
+        self._set_dim(dim)
+        self._stats = {"dim": self._dim, "count": int(count)}
         self._check_cells(positions)
-        space.use_spatial_hash(float(dim), int(count))
-
-    def _check_cells(self, positions: np.ndarray) -> None:
-        """Chipmunk's hash hangs (it walks every cell of a box, and its int cell indices overflow)
-        instead of failing: the study found it looping for minutes at coordinates of 1e12."""
-        problem = hash_cells_problem(positions, self.radii, self._dim, MAX_HASH_CELLS_PER_OBJECT,
-                                     reach=MAX_HASH_CELL_COORDINATE)
-        if problem:
-            raise ValueError(f"{self.name}: {problem} (Chipmunk's spatial hash; `dim` sets the cell)")
-
-    def _update(self, positions):
-        self._check_cells(positions)
-        super()._update(positions)
+        space.use_spatial_hash(self._dim, int(count))

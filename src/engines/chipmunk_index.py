@@ -27,9 +27,8 @@ import numpy as np
 import pymunk._chipmunk
 from numba import types
 
-from .base import BroadPhase, hash_cells_problem
-from .chipmunk import MAX_HASH_CELL_COORDINATE, MAX_HASH_CELLS_PER_OBJECT
-from .knobs import HASH_CELL_FACTORS, Knob, mean_diameter, sizes
+from .base import BroadPhase
+from .chipmunk import HASH_SWEEPS, HashCellGuard
 
 CDEF = """
 typedef double cpFloat;
@@ -191,7 +190,7 @@ class ChipmunkTreeIndex(_ChipmunkIndex):
         return index
 
 
-class ChipmunkHashIndex(_ChipmunkIndex):
+class ChipmunkHashIndex(HashCellGuard, _ChipmunkIndex):
     """Chipmunk's spatial hash without a Space: rehashed every frame, every pair that shares a
     cell reported (no box test). `dim` defaults to two mean diameters (as chipmunk.hash), `count`
     to 10 n cells (at least 1000)."""
@@ -199,24 +198,11 @@ class ChipmunkHashIndex(_ChipmunkIndex):
     name = "chipmunk.hash_index"
     method = "hash"
     defaults = {"dim": None, "count": None}
-    sweeps = (Knob("dim", sizes(mean_diameter, HASH_CELL_FACTORS), "hash cell size dim"),
-              Knob("count", lambda s: [max(1000, int(f * s.n)) for f in (1, 3, 10, 30)], "hash table size count"))
+    sweeps = HASH_SWEEPS
 
     def _new_index(self, positions, radii):
         dim = self.params["dim"] or (4.0 * float(radii.mean()) if self.n else 1.0) or 1.0
         count = self.params["count"] or max(1000, 10 * self.n)
-        if not (np.isfinite(dim) and dim > 0):
-            raise ValueError(f"{self.name}: dim must be a positive size, got {dim!r}")
-        self._dim = float(dim)
+        self._set_dim(dim)
         self._check_cells(positions)
         return lib.cpSpaceHashNew(self._dim, int(count), BOX_OF, ffi.NULL)
-
-    def _check_cells(self, positions: np.ndarray) -> None:
-        problem = hash_cells_problem(positions, self.radii, self._dim, MAX_HASH_CELLS_PER_OBJECT,
-                                     reach=MAX_HASH_CELL_COORDINATE)
-        if problem:
-            raise ValueError(f"{self.name}: {problem} (Chipmunk's spatial hash; `dim` sets the cell)")
-
-    def _update(self, positions):
-        self._check_cells(positions)
-        super()._update(positions)
