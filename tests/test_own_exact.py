@@ -39,6 +39,11 @@ EXACT = [
     ("own.grid_incremental", {}),
     ("own.grid_incremental", {"p": 7}),
     ("own.grid_incremental", {"cell": 0.3}),  # most objects large: found afresh every frame
+    ("own.grid_incremental", {"specialise": False}),  # the general kernels, even where every radius is equal
+    ("own.grid_parallel", {"parallel_from": 0}),  # the chunked kernels on every core, however small
+    ("own.grid_parallel", {"parallel_from": 0, "cell": 0.3}),
+    ("own.grid_parallel", {"parallel_from": 0, "specialise": False}),
+    ("own.grid_parallel", {}),  # below parallel_from: one thread
     ("own.quadtree", {}),
     ("own.quadtree", {"capacity": 1}),
     ("own.quadtree", {"capacity": 2, "max_depth": 3}),
@@ -272,14 +277,24 @@ def test_coherent_sorts_repair_small_motion_and_resort_after_large(name):
     backend.validate()
 
 
-@pytest.mark.parametrize("params", [{}, {"cell": 5.0}], ids=["default", "small cells"])
+# The incremental grids, one thread and chunked on every core, general and specialised.
+INCREMENTAL = [("own.grid_incremental", {}), ("own.grid_incremental", {"cell": 5.0}),
+               ("own.grid_incremental", {"specialise": False}), ("own.grid_parallel", {"parallel_from": 0}),
+               ("own.grid_parallel", {"parallel_from": 0, "cell": 5.0})]
+
+
+@pytest.mark.parametrize(("name", "params"), INCREMENTAL, ids=lambda v: str(v))
 @settings(max_examples=60)
-@given(scene=any_scene, seed=st.integers(0, 2**32 - 1), steps=st.lists(st.floats(0.0, 3.0), min_size=1, max_size=4))
-def test_grid_incremental_stays_exact_while_objects_drift_between_cells(params, scene, seed, steps):
-    # Small random steps: most frames update the candidates rather than rebuild them.
+@given(scene=any_scene, seed=st.integers(0, 2**32 - 1), steps=st.lists(st.floats(0.0, 3.0), min_size=1, max_size=4),
+       equal=st.booleans())
+def test_grid_incremental_stays_exact_while_objects_drift_between_cells(name, params, scene, seed, steps, equal):
+    # Small random steps: most frames update the candidates rather than rebuild them. Half the
+    # scenes get one radius for all, so the specialised kernels meet adversarial scenes too.
     positions, radii = scene
+    if equal and len(radii):
+        radii = np.full(len(radii), radii[0])
     rng = np.random.default_rng(seed)
-    grid = engines.create("own.grid_incremental", **params)
+    grid = engines.create(name, **params)
     grid.reset(positions, radii)
     for step in steps:
         positions = positions + rng.normal(0.0, step, positions.shape) * (rng.random(len(positions)) < 0.3)[:, None]
@@ -288,6 +303,60 @@ def test_grid_incremental_stays_exact_while_objects_drift_between_cells(params, 
         got = grid.pairs()
         assert is_canonical(got, len(positions)) is None
         assert np.array_equal(np.sort(keys(got, len(positions))), np.sort(keys(brute_pairs(positions, radii), len(positions))))
+
+
+@pytest.mark.parametrize("name", ["own.grid_incremental", "own.grid_parallel"])
+def test_incremental_grids_leave_out_radius_reads_only_where_every_radius_is_equal(name):
+    scene = generate("uniform", 3000, seed=2)  # the essay's scene: r = 10 for all
+    mixed = generate("uniform", 3000, radii=(5.0, 15.0), seed=2)
+    traj = simulate(scene, frames=4)
+    found = {}
+    for params in ({}, {"specialise": False}):
+        grid = engines.create(name, parallel_from=0, **params) if name == "own.grid_parallel" else \
+            engines.create(name, **params)
+        grid.reset(traj.positions[0], scene.radii)
+        found[str(params)] = []
+        for f in range(1, traj.frames):
+            grid.update(traj.positions[f])
+            found[str(params)].append(np.sort(keys(grid.pairs(), 3000)))
+        assert grid.stats().get("left_out_radius_reads", 0) == (params == {}), grid.stats()
+        grid.reset(mixed.positions, mixed.radii)
+        assert "left_out_radius_reads" not in grid.stats()
+    for f, (special, general) in enumerate(zip(found["{}"], found["{'specialise': False}"]), start=1):
+        np.testing.assert_array_equal(special, general)
+        np.testing.assert_array_equal(special, keys(traj.box_pairs[f], 3000))
+
+
+@pytest.mark.parametrize(("name", "params"), [("own.grid_incremental", {"p": 12}),
+                                              ("own.grid_parallel", {"p": 12, "parallel_from": 0})])
+def test_incremental_grids_stay_exact_when_the_scene_stops_qualifying_mid_run(name, params):
+    # One radius for all, and every object smaller than a cell, until the scene contracts: p x p
+    # cells over a shrinking extent get smaller than the objects, which all turn large (the
+    # bucket the specialised frames had no use for); then it spreads out again.
+    positions = np.random.default_rng(7).uniform(0.0, 400.0, (600, 2))
+    radii = np.full(600, 6.0)
+    grid = engines.create(name, **params)
+    grid.reset(positions, radii)
+    large = []
+    for scale in (1.0, 0.5, 0.2, 0.1, 0.2, 0.5, 1.0):
+        frame = 200.0 + (positions - 200.0) * scale
+        grid.update(frame)
+        grid.validate()
+        large.append(int((grid._state[0][2] == grid_incremental.key_space(grid._layout)[7]).sum()))
+        np.testing.assert_array_equal(np.sort(keys(grid.pairs(), 600)), np.sort(keys(brute_pairs(frame, radii), 600)))
+    assert large[0] == 0 and max(large) == 600 and large[-1] == 0, large
+
+
+def test_grid_parallel_runs_on_every_core_from_parallel_from_and_on_one_below():
+    traj = simulate(generate("uniform", 3000, seed=4), frames=3)
+    for parallel_from, parallel in ((3000, 1), (3001, 0)):
+        grid = engines.create("own.grid_parallel", parallel_from=parallel_from)
+        grid.reset(traj.positions[0], traj.scene.radii)
+        for f in range(1, traj.frames):
+            grid.update(traj.positions[f])
+            grid.validate()
+            assert grid.stats()["parallel"] == parallel
+            np.testing.assert_array_equal(np.sort(keys(grid.pairs(), 3000)), keys(traj.box_pairs[f], 3000))
 
 
 def test_grid_incremental_updates_its_candidates_while_few_objects_change_cell():

@@ -16,7 +16,7 @@ from scenes import generate
 from scenes.motion import simulate
 from strategies import any_scene
 
-STRUCTURED = ["own.grid", "own.grid_incremental", "own.sap", "own.sap_incremental", "own.sap_parallel",
+STRUCTURED = ["own.grid", "own.grid_incremental", "own.grid_parallel", "own.sap", "own.sap_incremental", "own.sap_parallel",
               "own.quadtree", "own.bvh"]
 
 

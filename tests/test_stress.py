@@ -19,7 +19,8 @@ from scenes.stress import STRESS_SCENES
 from strategies import BAD_SCENE_FILES
 
 ROOT = Path(__file__).resolve().parents[1]
-EXACT = ["own.sap", "own.sap_incremental", "own.sap_parallel", "own.grid", "own.quadtree", "own.bvh"]
+EXACT = ["own.sap", "own.sap_incremental", "own.sap_parallel", "own.grid", "own.grid_parallel", "own.quadtree",
+         "own.bvh"]
 
 
 @pytest.fixture(scope="module")

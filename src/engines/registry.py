@@ -78,6 +78,7 @@ BACKENDS: dict[str, str] = {
     "own.sap_parallel": "own.sap:ParallelSweepAndPrune",
     "own.grid": "own.grid:UniformGrid",
     "own.grid_incremental": "own.grid_incremental:IncrementalGrid",
+    "own.grid_parallel": "own.grid_parallel:ParallelIncrementalGrid",
     "own.quadtree": "own.quadtree:Quadtree",
     "own.bvh": "own.bvh:LinearBvh",
     "own.verlet": "own.verlet:VerletList",

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numba as nb
 import numpy as np
+from numba import types
+from numba.extending import overload
 
 
 @nb.njit(cache=True)
@@ -31,6 +33,28 @@ def swept_circles(before: np.ndarray, after: np.ndarray, radii: np.ndarray) -> t
     mid = 0.5 * before + 0.5 * after
     pad = 4 * np.finfo(float).eps * (np.abs(mid).max(axis=1) + radii + reach)
     return mid, radii + reach + pad
+
+
+def radius_of(radius, i):
+    """Object i's radius: radius[i], or `radius` itself where it is one float. Our kernels take a
+    scene whose radii are all equal as that float, and numba compiles them once more for it, with
+    no per-object radius read in their hot loops (own.grid_incremental: 1.1 to 1.3x faster at the
+    essay's density, `python -m studies.bench --specialised`)."""
+    return radius if np.ndim(radius) == 0 else radius[i]
+
+
+@overload(radius_of, inline="always")
+def _radius_of(radius, i):
+    if isinstance(radius, types.Float):
+        return lambda radius, i: radius
+    return lambda radius, i: radius[i]
+
+
+def one_radius(radii: np.ndarray) -> float | None:
+    """The radius every object has, or None where they differ (or there are none)."""
+    if len(radii) and radii.min() == radii.max():
+        return float(radii[0])
+    return None
 
 
 @nb.njit(cache=True, inline="always")

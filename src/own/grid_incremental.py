@@ -21,7 +21,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .common import PairCollector, centre_extents, emit
+from .common import PairCollector, centre_extents, emit, one_radius, radius_of
 from .grid import (CellLayout, cell_key, covered_cells, gather_centres, grid_layout, key_space, large_against_large,
                    small_limit)
 
@@ -38,6 +38,14 @@ LAYOUT_SLACK_CELLS = 4.0
 
 
 @nb.njit(cache=True, inline="always")
+def unpack(state):
+    """The arrays of `state` (new_state): rank -> object (perm), object -> rank; centres, radii
+    and keys by rank; the cells' lists (next, previous rank); keys by object."""
+    ids, xy, sr = state
+    return ids[0], ids[1], xy, sr, ids[2], ids[3], ids[4], ids[5]
+
+
+@nb.njit(cache=True, inline="always")
 def _link(head, nxt, prv, a, c):
     """Put rank a at the front of cell c's list (head is indexed by key + row width)."""
     h = head[c]
@@ -50,20 +58,20 @@ def _link(head, nxt, prv, a, c):
 @nb.njit(cache=True)
 def incremental_rebuild(positions, radii, layout, limit, state, head, cand):
     """Everything afresh: ranks in cell order (perm: rank -> object, rank: object -> rank), their
-    centres, radii and keys, the cells' lists and the candidates. Returns the number of
-    candidates; when it exceeds cand's rows, the caller must grow cand and rebuild."""
-    perm, rank, xy, sr, rkey, nxt, prv = state
+    centres, radii and keys, the objects' keys, the cells' lists and the candidates. Returns the
+    number of candidates; when it exceeds cand's rows, the caller must grow cand and rebuild."""
+    perm, rank, xy, sr, rkey, nxt, prv, okey = unpack(state)
     n = positions.shape[0]
     space = key_space(layout)
     w = space[6]
     for i in range(n):
-        rkey[i] = cell_key(positions[i, 0], positions[i, 1], radii[i], limit, space)
-    perm[:] = np.argsort(rkey, kind="mergesort")
+        okey[i] = cell_key(positions[i, 0], positions[i, 1], radii[i], limit, space)
+    perm[:] = np.argsort(okey, kind="mergesort")
     gather_centres(positions, perm, xy)
     for a in range(n):
         rank[perm[a]] = a
         sr[a] = radii[perm[a]]
-    rkey[:] = rkey[perm]
+    rkey[:] = okey[perm]
     head[:] = -1
     for a in range(n - 1, -1, -1):  # backwards: each list ascends
         _link(head, nxt, prv, a, rkey[a] + w)
@@ -94,24 +102,26 @@ def _add(cand, m, a, b):
 
 
 @nb.njit(cache=True)
-def incremental_update(positions, limit, layout, state, head, cand, m, movers, moved, max_movers):
+def incremental_update(positions, radius, limit, layout, state, head, cand, m, movers, moved, max_movers):
     """This frame's centres stored by rank; the ranks that changed cell moved between the lists,
-    their candidates dropped and their new neighbours added. Returns (candidates, movers), or
-    (-1, movers) when a rebuild is due: too many movers, or one that starts or stops being large.
-    A candidate count past cand's rows also asks for a rebuild, into a bigger cand."""
-    perm, rank, xy, sr, rkey, nxt, prv = state
+    their candidates dropped and their new neighbours added. `radius`: the radii, or the one
+    radius of them all (common.radius_of). Returns (candidates, movers), or (-1, movers) when a
+    rebuild is due: too many movers, or one that starts or stops being large. A candidate count
+    past cand's rows also asks for a rebuild, into a bigger cand."""
+    perm, rank, xy, sr, rkey, nxt, prv, okey = unpack(state)
     n = perm.shape[0]
     space = key_space(layout)
     w, large = space[6], space[7]
-    # Read in order and written by rank: 1.6x faster than gathering by rank at n = 2^20, where the
-    # positions outgrow the cache (a missed store does not hold up the loop; a missed load does).
-    for i in range(n):
-        a = rank[i]
-        xy[a, 0], xy[a, 1] = positions[i, 0], positions[i, 1]
+    # One pass in input order: centres stored by rank, and the cell compared with the object's
+    # last. Stores by rank, not loads: a missed store does not hold up the loop, a missed load does
+    # (1.6x faster than gathering by rank at n = 2^20). The movers are found in the same pass, from
+    # the objects' keys, rather than in a second one over the ranks' centres: k% faster (bench).
     k = 0
-    for a in range(n):  # a branch, not a branch-free append: 1 in 100 moves (1.4x faster, measured)
-        c = cell_key(xy[a, 0], xy[a, 1], sr[a], limit, space)
-        if c != rkey[a]:
+    for i in range(n):
+        a, x, y = rank[i], positions[i, 0], positions[i, 1]
+        xy[a, 0], xy[a, 1] = x, y
+        c = cell_key(x, y, radius_of(radius, i), limit, space)
+        if c != okey[i]:  # a branch, not a branch-free append: 1 in 100 moves (1.4x faster, measured)
             movers[k, 0], movers[k, 1] = a, c
             k += 1
     if k > max_movers:
@@ -130,7 +140,7 @@ def incremental_update(positions, limit, layout, state, head, cand, m, movers, m
             head[rkey[a] + w] = q
         if q >= 0:
             prv[q] = p
-        rkey[a] = c
+        rkey[a] = okey[perm[a]] = c
         _link(head, nxt, prv, a, c + w)
     t = 0
     while t < m:  # a mover's candidate is replaced by the last one: no store for the others
@@ -162,11 +172,13 @@ def head_length(layout):
 
 
 @nb.njit(cache=True)
-def incremental_step(positions, radii, p, cell, max_cells, layout, state, head, cand, m, movers, moved, max_movers):
+def incremental_step(positions, radii, radius, p, cell, max_cells, layout, state, head, cand, m, movers, moved,
+                     max_movers):
     """One call per frame (each compiled call from Python costs microseconds): the layout (own.grid's,
     kept while it fits), the small-object limit, and the ranks, lists and candidates updated, or
     rebuilt when the layout changed, incremental_update asks for it or m < 0 (none yet, or a
-    renewal due). Returns (limit, candidates, objects that changed cell, rebuilt). Candidates
+    renewal due). `radius` as in incremental_update. Returns (limit, candidates, objects that
+    changed cell, rebuilt). Candidates
     past cand's rows, or -1 when head has not head_length(layout) entries (it is not rebuilt
     then): the caller grows them and calls incremental_rebuild. (Handing an array back to Python
     would cost 0.4 us a call.)"""
@@ -175,7 +187,8 @@ def incremental_step(positions, radii, p, cell, max_cells, layout, state, head, 
     relayout = grid_layout(extent, n, p, cell, max_cells, layout, LAYOUT_SLACK_CELLS)
     limit = small_limit(extent, layout)
     if not relayout and m >= 0:
-        m, moved_now = incremental_update(positions, limit, layout, state, head, cand, m, movers, moved, max_movers)
+        m, moved_now = incremental_update(positions, radius, limit, layout, state, head, cand, m, movers, moved,
+                                          max_movers)
         if 0 <= m <= cand.shape[0]:
             return limit, m, moved_now, False
     if head.shape[0] != head_length(layout):
@@ -185,35 +198,51 @@ def incremental_step(positions, radii, p, cell, max_cells, layout, state, head, 
 
 @nb.njit(cache=True, inline="always")
 def _boxes_overlap(xy, sr, a, b):
-    """Whether the boxes of ranks a and b overlap (bounds x - r, x + r, as everywhere)."""
-    x, y, r = xy[a, 0], xy[a, 1], sr[a]
-    u, v, s = xy[b, 0], xy[b, 1], sr[b]
+    """Whether the boxes of ranks a and b overlap (bounds x - r, x + r, as everywhere); `sr`, the
+    radii by rank or their one radius."""
+    x, y, r = xy[a, 0], xy[a, 1], radius_of(sr, a)
+    u, v, s = xy[b, 0], xy[b, 1], radius_of(sr, b)
     return (max(x - r, u - s) <= min(x + r, u + s)) & (max(y - r, v - s) <= min(y + r, v + s))
 
 
 @nb.njit(cache=True)
-def incremental_pairs(state, head, cand, m, layout, limit, buf):
+def incremental_pairs(state, radius, head, cand, m, layout, limit, buf):
     """Box-overlap pairs into buf: the candidates tested, then the large objects found afresh.
-    Returns (pairs found, pair tests)."""
-    perm, rank, xy, sr, rkey, nxt, prv = state
-    n = perm.shape[0]
+    `radius`: the radii by rank, or their one radius. Returns (pairs found, pair tests)."""
+    perm, xy = state[0][0], state[1]
     count = 0
     rows = buf.shape[0]
     for t in range(m):  # branch-free: every candidate is written at row `count`, a hit kept
         a, b = cand[t, 0], cand[t, 1]
-        hit = _boxes_overlap(xy, sr, a, b)  # loaded before the store, which the compiler cannot move them past
+        hit = _boxes_overlap(xy, radius, a, b)  # loaded before the store, which the compiler cannot move them past
         if count < rows:
             buf[count, 0], buf[count, 1] = a, b
         count += hit
     for h in range(min(count, rows)):  # ranks to objects, for the hits only
         i, j = perm[buf[h, 0]], perm[buf[h, 1]]
         buf[h, 0], buf[h, 1] = min(i, j), max(i, j)
-    tests = m
+    return large_pairs(state, head, layout, limit, buf, count, m)
+
+
+@nb.njit(cache=True, inline="always")
+def first_large_rank(rkey, large):
+    """The first rank of a large object (n if none): they are the last ranks."""
+    a = rkey.shape[0]
+    while a > 0 and rkey[a - 1] == large:
+        a -= 1
+    return a
+
+
+@nb.njit(cache=True)
+def large_pairs(state, head, layout, limit, buf, count, tests):
+    """The large objects' pairs into buf from row `count` on, found afresh: each against the
+    small objects in the cells it covers, then against each other. Returns (pairs found, pair
+    tests), counting on from the given ones."""
+    perm, rank, xy, sr, rkey, nxt, prv, okey = unpack(state)
+    n = perm.shape[0]
     space = key_space(layout)
     w, large = space[6], space[7]
-    first_large = n
-    while first_large > 0 and rkey[first_large - 1] == large:  # they are the last ranks
-        first_large -= 1
+    first_large = first_large_rank(rkey, large)
     if first_large == n:
         return count, tests
     reach = 0.5 * max(limit, 0.0)
@@ -230,28 +259,34 @@ def incremental_pairs(state, head, cand, m, layout, limit, buf):
     return large_against_large(xy, sr, perm, first_large, buf, count, tests)
 
 
+def new_state(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The arrays of the kernels' `state` (see unpack): three arrays, not eight, since each array
+    handed to a compiled call costs about 60 ns to unpack (a few percent of a frame at n = 2048)."""
+    return np.empty((6, n), dtype=np.int64), np.empty((n, 2)), np.empty(n)
+
+
 class IncrementalGrid(CellLayout):
     """own.grid's cells with candidate pairs kept between frames (see the module's docstring).
 
-    `p` and `cell` as for own.grid. Fast while few objects change cell per frame; a frame where
+    `p` and `cell` as for own.grid; `specialise` (on by default) runs kernels without per-object
+    radius reads where every radius is equal (off: the general kernels, to measure the saving). Fast while few objects change cell per frame; a frame where
     many do (fast movers, a teleport) rebuilds, at 2-2.5x the cost of an own.grid frame (every
     object jumping: 0.24 against 0.095 ms at n = 2048, 24 against 12 ms at n = 131072).
     """
 
     name = "own.grid_incremental"
-    defaults = {"p": None, "cell": None}
+    defaults = {"p": None, "cell": None, "specialise": True}
 
     def __init__(self, **params):
         super().__init__(**params)
         self._collect = PairCollector()
+        self._counters: list = []
 
     def _reset(self, positions, radii):
         n = self.n
         self._start_layout(radii)
-        # rank -> object, object -> rank; centres, radii and keys by rank; the cells' lists (next,
-        # previous rank).
-        self._state = (np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty((n, 2)), np.empty(n),
-                       np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64))
+        self._state = new_state(n)
+        self._specialise(radii)
         self._head = np.empty(0, dtype=np.int64)  # first rank of each cell's list
         self._cand = np.empty((4 * n + 64, 2), dtype=np.int64)
         self._movers = np.empty((n, 2), dtype=np.int64)
@@ -260,15 +295,25 @@ class IncrementalGrid(CellLayout):
         self._moves = 0  # objects that changed cell since the last rebuild
         self._update(positions)
 
+    def _specialise(self, radii):
+        """Where every radius is equal (and `specialise` is on), the kernels take it as one float
+        and read no radius per object (common.radius_of); else the radii (in input order for the
+        update, by rank for the pairs)."""
+        one = one_radius(radii) if self.params["specialise"] else None
+        self._radius = self.radii if one is None else one
+        self._radius_by_rank = self._state[2] if one is None else one
+        self._left_out = {} if one is None else {"left_out_radius_reads": 1}
+
     def _update(self, positions):
         renew = self._moves > RENEW_AFTER_MOVES_PER_OBJECT * self.n
         self._limit, self._m, moved, rebuilt = incremental_step(
-            positions, self.radii, self._p, self._cell, self._max_cells, self._layout, self._state, self._head,
+            positions, self.radii, self._radius, self._p, self._cell, self._max_cells, self._layout, self._state, self._head,
             self._cand, -1 if renew else self._m, self._movers, self._moved, self.n // REBUILD_MOVERS_DIVISOR)
         self._moves = 0 if rebuilt else self._moves + moved
         if not 0 <= self._m <= len(self._cand):
             self._grow_and_rebuild(positions)
-        self._stats = {"moved": moved, "rebuilt": int(rebuilt), "candidates": self._m}
+        # Kept raw, made a dict only when asked (as own.grid does: a dict every frame costs 2%).
+        self._counters = [moved, int(rebuilt), self._m, None]  # tests: once the pairs are asked for
 
     def _grow_and_rebuild(self, positions):
         """Rebuild into a head sized for the layout and as many candidate rows as it needs."""
@@ -281,17 +326,29 @@ class IncrementalGrid(CellLayout):
                                           self._cand)
 
     def _pairs(self):
-        out, (tests,) = self._collect(incremental_pairs, self._state, self._head, self._cand, self._m, self._layout,
-                                      self._limit)
-        self._stats["tests"] = tests
+        out, (tests,) = self._collect(incremental_pairs, self._state, self._radius_by_rank, self._head, self._cand,
+                                      self._m, self._layout, self._limit)
+        self._counters[3] = tests
         return out
 
+    def stats(self):
+        if not self._counters:  # nothing built yet
+            return {}
+        moved, rebuilt, candidates, tests = self._counters
+        tested = {} if tests is None else {"tests": tests}
+        return {"moved": moved, "rebuilt": rebuilt, "candidates": candidates, **tested, **self._left_out}
+
+    def _candidates(self) -> np.ndarray:
+        """The candidate pairs of ranks, (m, 2)."""
+        return self._cand[:self._m]
+
     def validate(self):
-        perm, rank, xy, sr, rkey, nxt, prv = self._state
+        perm, rank, xy, sr, rkey, nxt, prv, okey = unpack(self._state)
         head = self._head
         w, large = key_space(self._layout)[6:]
         assert np.array_equal(np.sort(perm), np.arange(self.n)), "ranks are not a permutation"
         assert np.array_equal(rank[perm], np.arange(self.n)), "object -> rank is not perm's inverse"
+        assert np.array_equal(okey[perm], rkey), "the objects' keys are not their ranks' keys"
         assert np.array_equal(sr, self.radii[perm]), "rank radii are not the objects' radii"
         listed = np.zeros(self.n, dtype=np.int64)
         for c in np.flatnonzero(head >= 0):
@@ -309,6 +366,6 @@ class IncrementalGrid(CellLayout):
             in_cell.setdefault(int(rkey[a]), []).append(int(a))
         expected = {(a, b) for c, ranks in in_cell.items() for a in ranks
                     for d in (-w - 1, -w, -w + 1, -1, 0, 1, w - 1, w, w + 1) for b in in_cell.get(c + d, []) if a < b}
-        got = {(int(min(a, b)), int(max(a, b))) for a, b in self._cand[:self._m]}
+        got = {(int(min(a, b)), int(max(a, b))) for a, b in self._candidates()}
         assert len(got) == self._m, "a candidate is listed twice"
         assert got == expected, "the candidates are not the pairs of small objects in neighbouring cells"

@@ -7,11 +7,27 @@ share a counter. Results are reported apart from the single-thread figures.
 
 from __future__ import annotations
 
+import ctypes
+import os
+import sys
+
 import numba as nb
 import numpy as np
 
+
+def _load_tbb() -> None:
+    """pip's tbb wheel puts libtbb in <prefix>/lib, where numba's TBB layer does not look (conda's
+    does): load it first, so that the fork-safe layer can be TBB. TBB hands a kernel to the other
+    core in 2-3 us here; numba's own workqueue, the fallback, took 30 to 90 us (and far more on a
+    busy machine), more than a whole frame of our grid at n = 2048."""
+    path = os.path.join(sys.prefix, "lib", "libtbb.so.12")
+    if os.path.exists(path):
+        ctypes.CDLL(path, mode=ctypes.RTLD_GLOBAL)
+
+
+_load_tbb()
 # The studies fork a child per backend; GNU OpenMP (numba's choice on Linux when present) is not
-# fork-safe and can hang such a child, numba's own workqueue is.
+# fork-safe and can hang such a child; TBB and numba's workqueue are.
 nb.config.THREADING_LAYER = "forksafe"
 # Chunks per thread: more than one evens out chunks that hold more pairs than others (clumps).
 CHUNKS_PER_THREAD = 4
@@ -21,6 +37,15 @@ def threads() -> int:
     """Threads a parallel kernel uses (asking starts numba's pool: import this module first, so
     the pool is the fork-safe one)."""
     return nb.get_num_threads()
+
+
+def threading_layer() -> str:
+    """The layer the parallel kernels run on ("tbb", or "workqueue" without the tbb package),
+    known once one has run."""
+    try:
+        return nb.threading_layer()
+    except ValueError:  # no parallel kernel has run yet
+        return "not started"
 
 
 def chunk_count() -> int:

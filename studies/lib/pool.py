@@ -30,7 +30,7 @@ from . import trajectories
 JOB_STARTED = "broadphase-job-started"  # the event each start of a job logs on the scheduler
 CONNECT_TIMEOUT_S = 5
 # Backends that time themselves on every core: on this machine they run with no job beside them.
-ALL_CORES_BACKENDS = ("own.sap_parallel",)
+ALL_CORES_BACKENDS = ("own.sap_parallel", "own.grid_parallel")
 
 # Stop signals of the jobs under way in this process, by job key: a task cannot carry an event
 # (Dask serialises every task, even in-process), so a local job looks its signal up here.

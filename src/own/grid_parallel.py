@@ -1,0 +1,301 @@
+"""own.grid_incremental on every core: the same cells, lists and candidates, with each frame's
+passes over the objects and over the candidates split into chunks that run in parallel.
+
+The candidates are kept per chunk (a row of a (chunks, capacity, 2) array each), so that every
+thread drops its movers' candidates and tests the rest in its own rows, with no shared counter;
+a mover's new candidates (1 object in 100 moves per frame in the essay's scene) are dealt to the
+chunks in turn, so they stay level. Each chunk writes its hits to its own rows, and the chunks
+copy them, in parallel again, to their offsets in the one array returned: no serial pass over
+the pairs. What stays serial is small: moving the movers between the cells' lists, listing
+their new neighbours, and a rebuild (own.grid_incremental's, then dealt to the chunks) when
+one is due. Large objects are found afresh, serially, as in own.grid_incremental.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from .common import PairCollector, radius_of
+from .grid import cell_key, grid_layout, key_space, small_limit
+from .grid_incremental import (LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT,
+                               IncrementalGrid, _boxes_overlap, _link, first_large_rank, head_length,
+                               incremental_rebuild, large_pairs, new_state, unpack)
+from .parallel import chunk_count
+
+# Default `parallel_from`, in objects: below it the frame runs on one thread, as in
+# own.grid_incremental. With TBB a hand-off to the other core costs 2-3 us, and a frame makes
+# five; at the essay's density the split paid from about 16384 objects (bench --parallel-from).
+PARALLEL_FROM_OBJECTS = 16384
+
+
+@nb.njit(cache=True, inline="always")
+def _span(c, chunks, n):
+    """Chunk c's share of 0..n-1."""
+    return c * n // chunks, (c + 1) * n // chunks
+
+
+@nb.njit(cache=True, parallel=True)
+def chunked_update(positions, radius, limit, layout, state, head, cand, counts, movers, found, moved, max_movers):
+    """incremental_update with the candidates in chunks: returns (candidates, movers), or
+    (-1, movers) when a rebuild is due (too many movers, one that starts or stops being large, or
+    a chunk with no room for its new candidates)."""
+    perm, rank, xy, sr, rkey, nxt, prv, okey = unpack(state)
+    n, chunks, rows = perm.shape[0], counts.shape[0], cand.shape[1]
+    space = key_space(layout)
+    w, large = space[6], space[7]
+    for c in nb.prange(chunks):  # centres stored by rank, and each chunk's movers from its first row
+        lo, hi = _span(c, chunks, n)
+        k = lo
+        for i in range(lo, hi):
+            a, x, y = rank[i], positions[i, 0], positions[i, 1]
+            xy[a, 0], xy[a, 1] = x, y
+            key = cell_key(x, y, radius_of(radius, i), limit, space)
+            if key != okey[i]:
+                movers[k, 0], movers[k, 1] = a, key
+                k += 1
+        found[c] = k - lo
+    total = 0
+    for c in range(chunks):
+        total += found[c]
+    if total > max_movers:
+        return -1, total
+    for c in range(chunks):
+        lo = _span(c, chunks, n)[0]
+        for t in range(lo, lo + found[c]):
+            if movers[t, 1] == large or rkey[movers[t, 0]] == large:
+                return -1, total
+    for c in range(chunks):  # the movers change lists
+        lo = _span(c, chunks, n)[0]
+        for t in range(lo, lo + found[c]):
+            a, key = movers[t, 0], movers[t, 1]
+            moved[a] = 1
+            p, q = prv[a], nxt[a]
+            if p >= 0:
+                nxt[p] = q
+            else:
+                head[rkey[a] + w] = q
+            if q >= 0:
+                prv[q] = p
+            rkey[a] = okey[perm[a]] = key
+            _link(head, nxt, prv, a, key + w)
+    full = 0
+    for c in nb.prange(chunks):  # each chunk drops its candidates that moved, then adds its movers'
+        m, t = counts[c], 0
+        while t < m:
+            if moved[cand[c, t, 0]] | moved[cand[c, t, 1]]:
+                m -= 1
+                cand[c, t, 0], cand[c, t, 1] = cand[c, m, 0], cand[c, m, 1]
+            else:
+                t += 1
+        lo = _span(c, chunks, n)[0]
+        for t in range(lo, lo + found[c]):
+            a = movers[t, 0]
+            cell = rkey[a] + w
+            for d in (-w - 1, -w, -w + 1, -1, 0, 1, w - 1, w, w + 1):
+                b = head[cell + d]
+                while b >= 0:
+                    if b != a and (moved[b] == 0 or b > a):  # a pair of two movers: by the lower rank
+                        if m < rows:
+                            cand[c, m, 0], cand[c, m, 1] = a, b
+                        m += 1
+                    b = nxt[b]
+        if m > rows:
+            full += 1
+        counts[c] = min(m, rows)
+    for c in range(chunks):
+        lo = _span(c, chunks, n)[0]
+        for t in range(lo, lo + found[c]):
+            moved[movers[t, 0]] = 0
+    if full:
+        return -1, total
+    m = 0
+    for c in range(chunks):
+        m += counts[c]
+    return m, total
+
+
+@nb.njit(cache=True, parallel=True)
+def deal(flat, m, cand, counts):
+    """Candidates 0..m-1 of `flat` (a rebuild's) split evenly into the chunks; False if a chunk
+    has too few rows (the caller grows them)."""
+    chunks = counts.shape[0]
+    if (m + chunks - 1) // chunks > cand.shape[1]:
+        return False
+    for c in nb.prange(chunks):
+        lo, hi = _span(c, chunks, m)
+        cand[c, :hi - lo] = flat[lo:hi]
+        counts[c] = hi - lo
+    return True
+
+
+@nb.njit(cache=True, parallel=True)
+def chunked_extents(positions, chunks):
+    """common.centre_extents, each chunk of the centres on its own core."""
+    n = positions.shape[0]
+    if n == 0:
+        return 0.0, 0.0, 0.0, 0.0
+    part = np.empty((chunks, 4))
+    for c in nb.prange(chunks):
+        lo, hi = _span(c, chunks, n)
+        x0 = y0 = np.inf
+        x1 = y1 = -np.inf
+        for i in range(lo, hi):
+            x, y = positions[i, 0], positions[i, 1]
+            x0, x1 = min(x0, x), max(x1, x)
+            y0, y1 = min(y0, y), max(y1, y)
+        part[c, 0], part[c, 1], part[c, 2], part[c, 3] = x0, y0, x1, y1
+    return part[:, 0].min(), part[:, 1].min(), part[:, 2].max(), part[:, 3].max()
+
+
+@nb.njit(cache=True)
+def chunked_step(positions, radii, radius, p, cell, max_cells, layout, state, head, cand, counts, flat, m, movers, found,
+                 moved, max_movers):
+    """incremental_step with the candidates in chunks: returns (limit, candidates, objects that
+    changed cell, rebuilt), `radius` as in incremental_update; the candidates are -1 when the caller must grow head, flat or cand
+    and rebuild (see incremental_step)."""
+    n = positions.shape[0]
+    extent = chunked_extents(positions, counts.shape[0])
+    relayout = grid_layout(extent, n, p, cell, max_cells, layout, LAYOUT_SLACK_CELLS)
+    limit = small_limit(extent, layout)
+    if not relayout and m >= 0:
+        m, moved_now = chunked_update(positions, radius, limit, layout, state, head, cand, counts, movers, found, moved,
+                                      max_movers)
+        if m >= 0:
+            return limit, m, moved_now, False
+    if head.shape[0] != head_length(layout):
+        return limit, -1, n, True
+    m = incremental_rebuild(positions, radii, layout, limit, state, head, flat)
+    if m > flat.shape[0] or not deal(flat, m, cand, counts):
+        return limit, -1, n, True
+    return limit, m, n, True
+
+
+@nb.njit(cache=True, parallel=True)
+def chunked_pairs(state, radius, cand, counts, hits, found):
+    """The candidates' box-overlap pairs, as objects, in one new array: each chunk tests its own
+    candidates into its own rows of `hits` (as many as its candidates, so they always fit), then
+    copies them to its offset in the array. `radius`: the radii by rank, or their one radius."""
+    perm, xy = state[0][0], state[1]
+    chunks = counts.shape[0]
+    for c in nb.prange(chunks):
+        k = 0
+        for t in range(counts[c]):  # branch-free, as in incremental_pairs
+            a, b = cand[c, t, 0], cand[c, t, 1]
+            hit = _boxes_overlap(xy, radius, a, b)
+            hits[c, k, 0], hits[c, k, 1] = a, b
+            k += hit
+        for h in range(k):  # ranks to objects
+            i, j = perm[hits[c, h, 0]], perm[hits[c, h, 1]]
+            hits[c, h, 0], hits[c, h, 1] = min(i, j), max(i, j)
+        found[c] = k
+    offsets = np.zeros(chunks + 1, dtype=np.int64)
+    for c in range(chunks):
+        offsets[c + 1] = offsets[c] + found[c]
+    out = np.empty((offsets[chunks], 2), dtype=np.int64)
+    for c in nb.prange(chunks):
+        out[offsets[c]:offsets[c + 1]] = hits[c, :found[c]]
+    return out
+
+
+@nb.njit(cache=True)
+def has_large(state, layout):
+    """Whether any object is large (they are the last ranks)."""
+    rkey = state[0][2]
+    return first_large_rank(rkey, key_space(layout)[7]) < rkey.shape[0]
+
+
+@nb.njit(cache=True)
+def large_only(state, head, layout, limit, tests, buf):
+    """large_pairs from row 0 of buf, in PairCollector's calling order."""
+    return large_pairs(state, head, layout, limit, buf, 0, tests)
+
+
+class ParallelIncrementalGrid(IncrementalGrid):
+    """own.grid_incremental with each frame split over every core (see the module's docstring),
+    from `parallel_from` objects on; below that, one thread exactly as own.grid_incremental. Its
+    figures use every core: compare them with that in mind."""
+
+    name = "own.grid_parallel"
+    defaults = {**IncrementalGrid.defaults, "parallel_from": PARALLEL_FROM_OBJECTS}
+
+    def __init__(self, **params):
+        super().__init__(**params)
+        self._parallel_from = self._int_param("parallel_from", 0)
+        self._collect_large = PairCollector()
+
+    def _reset(self, positions, radii):
+        self._chunked = self.n >= self._parallel_from
+        if not self._chunked:
+            super()._reset(positions, radii)
+            return
+        n, chunks = self.n, chunk_count()
+        self._start_layout(radii)
+        self._state = new_state(n)
+        self._specialise(radii)
+        self._head = np.empty(0, dtype=np.int64)
+        self._flat = np.empty((4 * n + 64, 2), dtype=np.int64)  # a rebuild's candidates, before they are dealt
+        self._chunk_rows(len(self._flat))
+        self._counts, self._found = np.zeros(chunks, dtype=np.int64), np.zeros(chunks, dtype=np.int64)
+        self._movers = np.empty((n, 2), dtype=np.int64)
+        self._moved = np.zeros(n, dtype=np.uint8)
+        self._m = -1
+        self._moves = 0
+        self._update(positions)
+
+    def _chunk_rows(self, m: int) -> None:
+        """Candidate and hit rows for m candidates dealt to the chunks, with room for a quarter more."""
+        chunks = chunk_count()
+        rows = m // chunks + m // (4 * chunks) + 64
+        self._cand = np.empty((chunks, rows, 2), dtype=np.int64)
+        self._hits = np.empty((chunks, rows, 2), dtype=np.int64)
+
+    def _update(self, positions):
+        if not self._chunked:
+            super()._update(positions)
+            return
+        renew = self._moves > RENEW_AFTER_MOVES_PER_OBJECT * self.n
+        self._limit, self._m, moved, rebuilt = chunked_step(
+            positions, self.radii, self._radius, self._p, self._cell, self._max_cells, self._layout, self._state,
+            self._head, self._cand, self._counts, self._flat, -1 if renew else self._m, self._movers, self._found, self._moved,
+            self.n // REBUILD_MOVERS_DIVISOR)
+        self._moves = 0 if rebuilt else self._moves + moved
+        if self._m < 0:
+            self._grow_and_deal(positions)
+            rebuilt = True
+        self._counters = [moved, int(rebuilt), self._m, None]
+
+    def _grow_and_deal(self, positions):
+        """Rebuild into a head sized for the layout, and flat and chunked rows for every candidate."""
+        self._head = np.empty(head_length(self._layout), dtype=np.int64)
+        while True:
+            m = incremental_rebuild(positions, self.radii, self._layout, self._limit, self._state, self._head,
+                                    self._flat)
+            if m > len(self._flat):
+                self._flat = np.empty((m + m // 4 + 64, 2), dtype=np.int64)
+                continue
+            if deal(self._flat, m, self._cand, self._counts):
+                break
+            self._chunk_rows(m)
+        self._m = m
+
+    def _pairs(self):
+        if not self._chunked:
+            return super()._pairs()
+        out = chunked_pairs(self._state, self._radius_by_rank, self._cand, self._counts, self._hits, self._found)
+        tests = self._m
+        if has_large(self._state, self._layout):
+            large, (tests,) = self._collect_large(large_only, self._state, self._head, self._layout, self._limit,
+                                                  tests)
+            out = np.concatenate([out, large])
+        self._counters[3] = tests
+        return out
+
+    def stats(self):
+        counters = super().stats()
+        return {**counters, "parallel": int(self._chunked)} if counters else counters
+
+    def _candidates(self) -> np.ndarray:
+        if not self._chunked:
+            return super()._candidates()
+        return np.concatenate([self._cand[c, :k] for c, k in enumerate(self._counts)])
