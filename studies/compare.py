@@ -22,7 +22,7 @@ from .lib.options import (add_backends_option, add_output_options, add_quick_opt
                           add_trial_options, parse_checked, scene_from_args)
 from .lib.output import Output, read_meta
 from .lib.pool import Pool
-from .lib.results import RowWriter, cpu_models_note, missed_total, ok_lines, read_rows, summarise
+from .lib.results import RowWriter, cpu_models_note, left_out_note, missed_total, ok_lines, read_rows, summarise
 from .lib.runner import Runner
 from .lib.tables import add_speedup, format_table, ours_against_engines
 
@@ -105,9 +105,9 @@ def report(folder: Path, check: bool) -> int:
     headline = ours_against_engines(table) if not table.empty else None
     if headline:
         print(headline)
-    mixed = cpu_models_note(rows)
-    if mixed:
-        print(mixed)
+    for note in (cpu_models_note(rows), left_out_note(rows)):
+        if note:
+            print(note)
     print("times: median ±interquartile range over all timed frames and repeats; engine bp: the engine's own measure "
           "of its broad phase (ms), where it reports one;\ncand/true: candidates per truly overlapping pair (1 = no "
           "extra work); missed: truly overlapping pairs (and, for 'boxes' backends,\noverlapping boxes) absent from the "

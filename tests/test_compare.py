@@ -19,7 +19,7 @@ from scenes import generate
 from scenes.motion import simulate
 from studies.compare import main
 from studies.lib.harness import Job, run_isolated
-from studies.lib.results import COLUMNS
+from studies.lib.results import COLUMNS, left_out_note
 from studies.lib.tables import ours_against_engines
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -48,6 +48,19 @@ def test_quick_run_end_to_end(tmp_path):
     assert meta["versions"]["numpy"] and meta["machine"]["cores"] >= 1 and "--quick" in meta["command"]
     assert (out / "compare.png").stat().st_size > 10_000
     assert "own.grid" in result.stdout and "total ms" in result.stdout and str(out) in result.stdout
+    # n = 64: our structured backends built no structure, and the report says so.
+    note = next(line for line in result.stdout.splitlines() if line.startswith("left out the structure"))
+    assert "own.grid" in note and "own.sap" in note and "own.brute" not in note
+
+
+def test_the_report_names_the_parts_each_backend_left_out():
+    stats = {"own.grid": '{"tests": 5, "left_out_radius_reads": 1}', "own.sap": '{"small_scene": 1}',
+             "own.quadtree": '{"tests": 9}', "own.bvh": None}
+    rows = pd.DataFrame({"backend": list(stats), "stats": list(stats.values()), "status": "ok"})
+    note = left_out_note(rows)
+    assert note == ("left out the structure (a scene this small takes one compiled sweep a frame): own.sap; "
+                    "left out per-object radius reads (every radius is equal): own.grid")
+    assert left_out_note(rows[rows.backend == "own.quadtree"]) == ""
 
 
 def test_user_scene_file_and_backend_patterns(tmp_path):

@@ -172,10 +172,11 @@ def chunked_step(positions, radii, radius, p, cell, max_cells, layout, state, he
 
 
 @nb.njit(cache=True, parallel=True)
-def chunked_pairs(state, radius, cand, counts, hits, found):
-    """The candidates' box-overlap pairs, as objects, in one new array: each chunk tests its own
+def chunked_pairs(state, radius, cand, counts, hits, found, buf):
+    """The candidates' box-overlap pairs, as objects, into buf: each chunk tests its own
     candidates into its own rows of `hits` (as many as its candidates, so they always fit), then
-    copies them to its offset in the array. `radius`: the radii by rank, or their one radius."""
+    copies them to its offset in buf (if they all fit: PairCollector's protocol). `radius`: the
+    radii by rank, or their one radius. Returns (pairs found, pair tests)."""
     perm, xy = state[0][0], state[1]
     chunks = counts.shape[0]
     for c in nb.prange(chunks):
@@ -190,12 +191,14 @@ def chunked_pairs(state, radius, cand, counts, hits, found):
             hits[c, h, 0], hits[c, h, 1] = min(i, j), max(i, j)
         found[c] = k
     offsets = np.zeros(chunks + 1, dtype=np.int64)
+    tests = 0
     for c in range(chunks):
         offsets[c + 1] = offsets[c] + found[c]
-    out = np.empty((offsets[chunks], 2), dtype=np.int64)
-    for c in nb.prange(chunks):
-        out[offsets[c]:offsets[c + 1]] = hits[c, :found[c]]
-    return out
+        tests += counts[c]
+    if offsets[chunks] <= buf.shape[0]:
+        for c in nb.prange(chunks):
+            buf[offsets[c]:offsets[c + 1]] = hits[c, :found[c]]
+    return offsets[chunks], tests
 
 
 @nb.njit(cache=True)
@@ -232,7 +235,7 @@ class ParallelIncrementalGrid(IncrementalGrid):
         n, chunks = self.n, chunk_count()
         self._start_layout(radii)
         self._state = new_state(n)
-        self._specialise(radii)
+        self._specialise()
         self._head = np.empty(0, dtype=np.int64)
         self._flat = np.empty((4 * n + 64, 2), dtype=np.int64)  # a rebuild's candidates, before they are dealt
         self._chunk_rows(len(self._flat))
@@ -282,8 +285,8 @@ class ParallelIncrementalGrid(IncrementalGrid):
     def _pairs(self):
         if not self._chunked:
             return super()._pairs()
-        out = chunked_pairs(self._state, self._radius_by_rank, self._cand, self._counts, self._hits, self._found)
-        tests = self._m
+        out, (tests,) = self._collect(chunked_pairs, self._state, self._radius_by_rank, self._cand, self._counts,
+                                      self._hits, self._found)
         if has_large(self._state, self._layout):
             large, (tests,) = self._collect_large(large_only, self._state, self._head, self._layout, self._limit,
                                                   tests)

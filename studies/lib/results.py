@@ -24,6 +24,8 @@ from typing import Any, Iterable
 import numpy as np
 import pandas as pd
 
+from own.common import LEFT_OUT
+
 from .cli import NO_SPACE, CliError
 
 COLUMNS = [
@@ -180,6 +182,18 @@ def cpu_models_note(rows: pd.DataFrame) -> str:
                        for cpu, d in rows.dropna(subset=["cpu"]).groupby("cpu"))
     return (f"NOTE: these timings come from {rows.cpu.dropna().nunique()} CPU models ({models}); a ratio between "
             "backends timed on different models compares the machines as well as the backends")
+
+
+def left_out_note(rows: pd.DataFrame) -> str:
+    """Which backends left out which parts of a frame for this scene (own.common.LEFT_OUT), as
+    their counters said in any timed frame; "" where none did."""
+    backends: dict[str, set[str]] = {}
+    for backend, stats in rows.loc[rows.status == "ok", ["backend", "stats"]].dropna().itertuples(index=False):
+        for key in json.loads(stats):
+            if key in LEFT_OUT:
+                backends.setdefault(key, set()).add(backend)
+    return "; ".join(f"left out {LEFT_OUT[key]}: {', '.join(sorted(backends[key]))}" for key in LEFT_OUT
+                     if key in backends)
 
 
 def stored_runs(folder: Path) -> dict[str, list[dict[str, Any]]]:
