@@ -1,15 +1,18 @@
 """own.grid_incremental on every core: the same cells, lists and candidates, with each frame's
 passes over the objects and over the candidates split into chunks that run in parallel.
 
-The candidates are kept per chunk (a row of a (chunks, capacity, 2) array each), so that every
-thread drops its movers' candidates and tests the rest in its own rows, with no shared counter;
-a mover's new candidates (1 object in 100 moves per frame in the essay's scene) are dealt to the
-chunks in turn, so they stay level. Each chunk writes its hits to its own rows, and the chunks
-copy them, in parallel again, to their offsets in the one array returned: no serial pass over
-the pairs. What stays serial is small: moving the movers between the cells' lists, listing
-their new neighbours, and a rebuild (own.grid_incremental's, then dealt to the chunks) when
-one is due. Large objects are found afresh, serially, as in own.grid_incremental.
-"""
+The objects are split into chunks by input order: each chunk stores its centres by rank and
+lists its movers (objects that changed cell, 1 in 100 per frame in the essay's scene). The
+candidates are kept per chunk (a row of a (chunks, capacity, 2) array each), so that every
+thread drops its candidates that involve a mover, lists the new ones of its own movers and tests
+them all in its own rows, with no shared counter. Each chunk writes its hits to its own rows,
+and the chunks copy them, in parallel again, to their offsets in the array handed back: no
+serial pass over the pairs. What stays serial is small: moving the movers between the cells'
+lists, and a rebuild (own.grid_incremental's, then dealt to the chunks) when one is due. Large
+objects are found afresh, serially, as in own.grid_incremental.
+
+Measured at the essay's density (python -m studies.bench): 0.81 against 1.33 ms a frame on one
+thread at n = 131072, 10.4 against 18.1 ms at 2^20; it loses below about 16384 objects."""
 
 from __future__ import annotations
 

@@ -34,10 +34,11 @@ MAX_CROWDED_SHARE = 1 / 32
 # sap_sweep_sparse numbers a window's objects in int32.
 MAX_SPARSE_N = 2**31 - 1
 # Default `parallel_from`: a parallel sweep runs on every core only once last frame's had this
-# many sweep-axis overlaps (its work). Handing chunks to the other thread costs 0.5 to 1 ms a
-# call on a shared 2-core machine, measured to pay from about 2^23 (n = 65536 at the essay's
-# density).
-PARALLEL_FROM_OVERLAPS = 2**23
+# many sweep-axis overlaps (its work). On TBB (own/parallel.py) it lost at the essay's density
+# with 335 thousand (n = 8192: 0.45 against 0.36 ms a frame) and won with 947 thousand (16384:
+# 0.59 against 0.77 ms); on numba's workqueue layer, whose hand-off costs far more, it paid only
+# from about 2^23.
+PARALLEL_FROM_OVERLAPS = 2**19
 
 
 @nb.njit(cache=True)
