@@ -102,6 +102,36 @@ def _add(cand, m, a, b):
 
 
 @nb.njit(cache=True)
+def move(state, head, moved, a, c, w):
+    """Rank a, marked as moved, leaves its cell's list for cell c's."""
+    perm, rank, xy, sr, rkey, nxt, prv, okey = unpack(state)
+    moved[a] = 1
+    p, q = prv[a], nxt[a]
+    if p >= 0:
+        nxt[p] = q
+    else:
+        head[rkey[a] + w] = q
+    if q >= 0:
+        prv[q] = p
+    rkey[a] = okey[perm[a]] = c
+    _link(head, nxt, prv, a, c + w)
+
+
+@nb.njit(cache=True)
+def drop_moved(cand, m, moved):
+    """Candidates 0..m-1 less those of a moved rank, each replaced by the last one (no store for
+    the others); returns how many remain."""
+    t = 0
+    while t < m:
+        if moved[cand[t, 0]] | moved[cand[t, 1]]:
+            m -= 1
+            cand[t, 0], cand[t, 1] = cand[m, 0], cand[m, 1]
+        else:
+            t += 1
+    return m
+
+
+@nb.njit(cache=True)
 def incremental_update(positions, radius, limit, layout, state, head, cand, m, movers, moved, max_movers):
     """This frame's centres stored by rank; the ranks that changed cell moved between the lists,
     their candidates dropped and their new neighbours added. `radius`: the radii, or the one
@@ -131,24 +161,8 @@ def incremental_update(positions, radius, limit, layout, state, head, cand, m, m
         if c == large or rkey[a] == large:
             return -1, k
     for t in range(k):
-        a, c = movers[t, 0], movers[t, 1]
-        moved[a] = 1
-        p, q = prv[a], nxt[a]  # leave the old cell
-        if p >= 0:
-            nxt[p] = q
-        else:
-            head[rkey[a] + w] = q
-        if q >= 0:
-            prv[q] = p
-        rkey[a] = okey[perm[a]] = c
-        _link(head, nxt, prv, a, c + w)
-    t = 0
-    while t < m:  # a mover's candidate is replaced by the last one: no store for the others
-        if moved[cand[t, 0]] | moved[cand[t, 1]]:
-            m -= 1
-            cand[t, 0], cand[t, 1] = cand[m, 0], cand[m, 1]
-        else:
-            t += 1
+        move(state, head, moved, movers[t, 0], movers[t, 1], w)
+    m = drop_moved(cand, m, moved)
     for t in range(k):  # the movers' new neighbours; a pair of two movers is added by the lower rank
         a = movers[t, 0]
         c = rkey[a] + w

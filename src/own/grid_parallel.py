@@ -22,8 +22,8 @@ import numpy as np
 from .common import PairCollector, radius_of
 from .grid import cell_key, grid_layout, key_space, small_limit
 from .grid_incremental import (LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT,
-                               IncrementalGrid, _boxes_overlap, _link, first_large_rank, head_length,
-                               incremental_rebuild, large_pairs, new_state, unpack)
+                               IncrementalGrid, _boxes_overlap, drop_moved, first_large_rank, head_length,
+                               incremental_rebuild, large_pairs, move, new_state, unpack)
 from .parallel import chunk_count
 
 # Default `parallel_from`, in objects: below it the frame runs on one thread, as in
@@ -71,26 +71,10 @@ def chunked_update(positions, radius, limit, layout, state, head, cand, counts, 
     for c in range(chunks):  # the movers change lists
         lo = _span(c, chunks, n)[0]
         for t in range(lo, lo + found[c]):
-            a, key = movers[t, 0], movers[t, 1]
-            moved[a] = 1
-            p, q = prv[a], nxt[a]
-            if p >= 0:
-                nxt[p] = q
-            else:
-                head[rkey[a] + w] = q
-            if q >= 0:
-                prv[q] = p
-            rkey[a] = okey[perm[a]] = key
-            _link(head, nxt, prv, a, key + w)
+            move(state, head, moved, movers[t, 0], movers[t, 1], w)
     full = 0
     for c in nb.prange(chunks):  # each chunk drops its candidates that moved, then adds its movers'
-        m, t = counts[c], 0
-        while t < m:
-            if moved[cand[c, t, 0]] | moved[cand[c, t, 1]]:
-                m -= 1
-                cand[c, t, 0], cand[c, t, 1] = cand[c, m, 0], cand[c, m, 1]
-            else:
-                t += 1
+        m = drop_moved(cand[c], counts[c], moved)
         lo = _span(c, chunks, n)[0]
         for t in range(lo, lo + found[c]):
             a = movers[t, 0]
