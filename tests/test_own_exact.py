@@ -9,7 +9,8 @@ from hypothesis import strategies as st
 
 import engines
 from engines.pairs import is_canonical, keys
-from own import grid_incremental
+from own import grid_incremental, grid_parallel
+from own.parallel import chunk_count
 from own.brute import brute_pairs
 from own.small import SmallScenes
 from scenes import generate
@@ -357,6 +358,31 @@ def test_grid_parallel_runs_on_every_core_from_parallel_from_and_on_one_below():
             grid.validate()
             assert grid.stats()["parallel"] == parallel
             np.testing.assert_array_equal(np.sort(keys(grid.pairs(), 3000)), keys(traj.box_pairs[f], 3000))
+
+
+def test_grid_parallel_rebuilds_when_a_chunk_has_no_room_for_its_new_candidates(monkeypatch):
+    def tight_rows(self, m):  # no spare row: the first mover's new candidate overflows its chunk
+        rows = -(-m // chunk_count())
+        self._cand = np.empty((chunk_count(), rows, 2), dtype=np.int64)
+        self._hits = np.empty_like(self._cand)
+
+    monkeypatch.setattr(grid_parallel.ParallelIncrementalGrid, "_chunk_rows", tight_rows)
+    scene = generate("uniform", 3000, seed=6)
+    grid = engines.create("own.grid_parallel", parallel_from=0)
+    grid.reset(scene.positions, scene.radii)  # chunks sized for 4 candidates an object: room to spare
+    grid._chunk_rows(grid._m)  # dealt again, tight
+    assert grid_parallel.deal(grid._flat, grid._m, grid._cand, grid._counts)
+    grid.validate()
+    # Only the first chunk's objects (in input order) move, a few per frame, each by a cell: that
+    # chunk lists all their new candidates, while those they drop are spread over every chunk.
+    positions, rebuilt = scene.positions.copy(), []
+    for frame in range(4):
+        positions[frame * 20:(frame + 1) * 20] += 20.0
+        grid.update(positions)
+        grid.validate()
+        rebuilt.append(grid.stats()["rebuilt"])
+        assert np.array_equal(np.sort(keys(grid.pairs(), 3000)), np.sort(keys(brute_pairs(positions, scene.radii), 3000)))
+    assert rebuilt == [1, 1, 1, 1]  # every frame overflowed the first chunk, and rebuilt exactly
 
 
 def test_grid_incremental_updates_its_candidates_while_few_objects_change_cell():

@@ -11,8 +11,8 @@ serial pass over the pairs. What stays serial is small: moving the movers betwee
 lists, and a rebuild (own.grid_incremental's, then dealt to the chunks) when one is due. Large
 objects are found afresh, serially, as in own.grid_incremental.
 
-Measured at the essay's density (python -m studies.bench): 0.81 against 1.33 ms a frame on one
-thread at n = 131072, 10.4 against 18.1 ms at 2^20; it loses below about 16384 objects."""
+Measured at the essay's density (python -m studies.bench, 2 cores): 0.87 against 1.26 ms a frame
+on one thread at n = 131072, 9.6 against 19.5 ms at 2^20; it loses below about 16384 objects."""
 
 from __future__ import annotations
 
@@ -28,7 +28,8 @@ from .parallel import chunk_count
 
 # Default `parallel_from`, in objects: below it the frame runs on one thread, as in
 # own.grid_incremental. With TBB a hand-off to the other core costs 2-3 us, and a frame makes
-# five; at the essay's density the split paid from about 16384 objects (bench --parallel-from).
+# six; at the essay's density the split lost at 8192 objects (0.083 against 0.072 ms a frame)
+# and drew level at 16384 (0.13 against 0.14 ms).
 PARALLEL_FROM_OBJECTS = 16384
 
 
