@@ -470,3 +470,18 @@ def test_verlet_list_rebuilt_every_k_frames_misses_pairs_when_objects_outrun_the
             verlet.update(traj.positions[f])
             lost[every] += np.setdiff1d(keys(traj.box_pairs[f], n), keys(verlet.pairs(), n)).size
     assert lost[None] == 0 and lost[10] > 0
+
+
+def test_parallel_backends_run_in_a_child_forked_after_the_parent_used_every_core():
+    # The studies fork a child per job; a threading layer that is not fork-safe (GNU OpenMP)
+    # hangs such a child once the parent has run a parallel kernel. Ours must not.
+    from studies.lib.harness import Job, run_isolated
+
+    traj = simulate(generate("uniform", 3000, seed=8), frames=3)
+    for name in ("own.grid_parallel", "own.sap_parallel"):
+        backend = engines.create(name, parallel_from=0)
+        backend.reset(traj.positions[0], traj.scene.radii)
+        backend.pairs()  # the parent's threads are started
+    for name in ("own.grid_parallel", "own.sap_parallel"):
+        outcome = run_isolated(Job(name, params={"parallel_from": 0}, timeout_s=120.0), traj)
+        assert outcome.status == "ok" and all(row["missed"] == 0 for row in outcome.rows), outcome.status

@@ -1,7 +1,8 @@
 """Broad phases behind one interface: `create(name, **params)`, `names()`, `available()`."""
 
 from .base import BroadPhase, PairArray
-from .registry import FAMILIES, Family, available, backend_class, create, family, match, names, of_kind, unavailable
+from .registry import (FAMILIES, Family, available, backend_class, create, family, match, names, of_kind, unavailable,
+                       uses_every_core)
 
 __all__ = ["FAMILIES", "BroadPhase", "Family", "PairArray", "available", "backend_class", "create", "family", "match",
-           "names", "of_kind", "unavailable"]
+           "names", "of_kind", "unavailable", "uses_every_core"]

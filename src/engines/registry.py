@@ -127,6 +127,15 @@ def family(name: str) -> Family:
     return FAMILIES[prefix]
 
 
+# Our backends that run on every core; every other backend here, engines included, runs on one.
+EVERY_CORE = ("own.sap_parallel", "own.grid_parallel")
+
+
+def uses_every_core(name: str, params: dict | None = None) -> bool:
+    """Whether the backend, with these parameters, runs on every core (our SAP with `parallel`)."""
+    return name in EVERY_CORE or bool((params or {}).get("parallel"))
+
+
 def of_kind(name: str, *kinds: Kind) -> bool:
     """Whether the backend's family is of one of these kinds ("own", "essay", "engine", "library")."""
     return family(name).kind in kinds

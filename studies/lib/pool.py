@@ -22,6 +22,8 @@ import uuid
 import warnings
 from typing import Any
 
+import engines
+
 from .cli import CliError
 from .harness import Job, Outcome, run_isolated
 from .output import cpu_model
@@ -29,8 +31,6 @@ from . import trajectories
 
 JOB_STARTED = "broadphase-job-started"  # the event each start of a job logs on the scheduler
 CONNECT_TIMEOUT_S = 5
-# Backends that time themselves on every core: on this machine they run with no job beside them.
-ALL_CORES_BACKENDS = ("own.sap_parallel", "own.grid_parallel")
 
 # Stop signals of the jobs under way in this process, by job key: a task cannot carry an event
 # (Dask serialises every task, even in-process), so a local job looks its signal up here.
@@ -58,7 +58,8 @@ def check_cluster_options(args: argparse.Namespace) -> None:
 
 
 def uses_all_cores(job: Job) -> bool:
-    return job.backend in ALL_CORES_BACKENDS or bool(job.params.get("parallel"))
+    """Backends that time themselves on every core run with no job beside them on this machine."""
+    return engines.uses_every_core(job.backend, job.params)
 
 
 def execute(job: Job, run_id: str) -> Outcome:
