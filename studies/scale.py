@@ -116,8 +116,9 @@ VERSUS = ["dist", "n", "ours", "ours_ms", "engine", "engine_ms", "ratio", "timed
 
 def ours_against_engines_per_n(medians: pd.DataFrame) -> pd.DataFrame:
     """Per distribution and n where both ran: our fastest backend on one thread (as the engines
-    run) and the fastest engine, end to end per frame, and the ratio; and, where an engine that ran reports its own broad-phase time,
-    the fastest by that timer against our quickest update + pairs (`bp_ratio`)."""
+    run) and the fastest engine, end to end per frame, and the ratio; and, where an engine that
+    ran reports its own broad-phase time, the fastest by that timer against our quickest
+    update + pairs (`bp_ratio`)."""
     rows = []
     for (dist, n), d in medians.groupby(["dist", "n"], sort=False):
         ours = d[d.backend.map(lambda b: engines.of_kind(b, "own") and not engines.uses_every_core(b))]

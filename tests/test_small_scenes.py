@@ -16,8 +16,8 @@ from scenes import generate
 from scenes.motion import simulate
 from strategies import any_scene
 
-STRUCTURED = ["own.grid", "own.grid_incremental", "own.grid_parallel", "own.sap", "own.sap_incremental", "own.sap_parallel",
-              "own.quadtree", "own.bvh"]
+STRUCTURED = ["own.grid", "own.grid_incremental", "own.grid_parallel", "own.sap", "own.sap_incremental",
+              "own.sap_parallel", "own.quadtree", "own.bvh"]
 
 
 def same_pairs(got: np.ndarray, positions: np.ndarray, radii: np.ndarray) -> None:

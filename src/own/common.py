@@ -177,9 +177,10 @@ class PairCollector:
 
     def _free_buffer(self, rows: int) -> np.ndarray:
         """A buffer of at least `rows` rows that nobody else holds, reused where one is free."""
-        for buf in self._ring:
-            if len(buf) >= rows and sys.getrefcount(buf) - 1 <= self._alone:  # -1: the loop's own reference
-                return buf
+        for k in range(len(self._ring)):
+            # Counted as the baseline was, `self._ring[k]` itself: no loop variable holds it.
+            if len(self._ring[k]) >= rows and sys.getrefcount(self._ring[k]) <= self._alone:
+                return self._ring[k]
         buf = np.empty((rows, 2), dtype=np.int64)
         self._ring = [buf, *self._ring[:self.RING - 1]]
         return buf

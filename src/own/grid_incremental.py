@@ -291,9 +291,10 @@ class IncrementalGrid(CellLayout):
     """own.grid's cells with candidate pairs kept between frames (see the module's docstring).
 
     `p` and `cell` as for own.grid; `specialise` (on by default) runs kernels without per-object
-    radius reads where every radius is equal (off: the general kernels, to measure the saving). Fast while few objects change cell per frame; a frame where
-    many do (fast movers, a teleport) rebuilds, at 2-2.5x the cost of an own.grid frame (every
-    object jumping: 0.24 against 0.095 ms at n = 2048, 24 against 12 ms at n = 131072).
+    radius reads where every radius is equal (off: the general kernels, to measure the saving).
+    Fast while few objects change cell per frame; a frame where many do (fast movers, a teleport)
+    rebuilds, at 2-2.5x the cost of an own.grid frame (every object jumping: 0.24 against 0.095
+    ms at n = 2048, 24 against 12 ms at n = 131072).
     """
 
     name = "own.grid_incremental"
@@ -327,8 +328,9 @@ class IncrementalGrid(CellLayout):
     def _update(self, positions):
         renew = self._moves > RENEW_AFTER_MOVES_PER_OBJECT * self.n
         self._limit, self._m, moved, rebuilt = incremental_step(
-            positions, self.radii, self._radius, self._p, self._cell, self._max_cells, self._layout, self._state, self._head,
-            self._cand, -1 if renew else self._m, self._movers, self._moved, self.n // REBUILD_MOVERS_DIVISOR)
+            positions, self.radii, self._radius, self._p, self._cell, self._max_cells, self._layout, self._state,
+            self._head, self._cand, -1 if renew else self._m, self._movers, self._moved,
+            self.n // REBUILD_MOVERS_DIVISOR)
         self._moves = 0 if rebuilt else self._moves + moved
         if not 0 <= self._m <= len(self._cand):
             self._grow_and_rebuild(positions)

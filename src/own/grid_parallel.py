@@ -137,11 +137,11 @@ def chunked_extents(positions, chunks):
 
 
 @nb.njit(cache=True)
-def chunked_step(positions, radii, radius, p, cell, max_cells, layout, state, head, cand, counts, flat, m, movers, found,
-                 moved, max_movers):
-    """incremental_step with the candidates in chunks: returns (limit, candidates, objects that
-    changed cell, rebuilt), `radius` as in incremental_update; the candidates are -1 when the caller must grow head, flat or cand
-    and rebuild (see incremental_step)."""
+def chunked_step(positions, radii, radius, p, cell, max_cells, layout, state, head, cand, counts, flat, m, movers,
+                 found, moved, max_movers):
+    """incremental_step with the candidates in chunks (`radius` as in incremental_update): returns
+    (limit, candidates, objects that changed cell, rebuilt), the candidates -1 when the caller
+    must grow head, flat or cand and rebuild (see incremental_step)."""
     n = positions.shape[0]
     extent = chunked_extents(positions, counts.shape[0])
     relayout = grid_layout(extent, n, p, cell, max_cells, layout, LAYOUT_SLACK_CELLS)
@@ -248,8 +248,8 @@ class ParallelIncrementalGrid(IncrementalGrid):
         renew = self._moves > RENEW_AFTER_MOVES_PER_OBJECT * self.n
         self._limit, self._m, moved, rebuilt = chunked_step(
             positions, self.radii, self._radius, self._p, self._cell, self._max_cells, self._layout, self._state,
-            self._head, self._cand, self._counts, self._flat, -1 if renew else self._m, self._movers, self._found, self._moved,
-            self.n // REBUILD_MOVERS_DIVISOR)
+            self._head, self._cand, self._counts, self._flat, -1 if renew else self._m, self._movers, self._found,
+            self._moved, self.n // REBUILD_MOVERS_DIVISOR)
         self._moves = 0 if rebuilt else self._moves + moved
         if self._m < 0:
             self._grow_and_deal(positions)
