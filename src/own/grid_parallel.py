@@ -22,8 +22,8 @@ import numpy as np
 from .common import PairCollector, radius_of
 from .grid import cell_key, grid_layout, key_space, small_limit
 from .grid_incremental import (LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT,
-                               IncrementalGrid, _boxes_overlap, drop_moved, first_large_rank, head_length,
-                               incremental_rebuild, large_pairs, move, new_state, unpack)
+                               IncrementalGrid, _boxes_overlap, add_neighbours, drop_moved, first_large_rank,
+                               head_length, incremental_rebuild, large_pairs, move, unpack)
 from .parallel import chunk_count
 
 # Default `parallel_from`, in objects: below it the frame runs on one thread, as in
@@ -71,23 +71,12 @@ def chunked_update(positions, radius, limit, layout, state, head, cand, counts, 
                 return -1, total
     for c in range(chunks):  # the movers change lists
         lo = _span(c, chunks, n)[0]
-        for t in range(lo, lo + found[c]):
-            move(state, head, moved, movers[t, 0], movers[t, 1], w)
+        move(state, head, moved, movers, lo, lo + found[c], w)
     full = 0
     for c in nb.prange(chunks):  # each chunk drops its candidates that moved, then adds its movers'
         m = drop_moved(cand[c], counts[c], moved)
         lo = _span(c, chunks, n)[0]
-        for t in range(lo, lo + found[c]):
-            a = movers[t, 0]
-            cell = rkey[a] + w
-            for d in (-w - 1, -w, -w + 1, -1, 0, 1, w - 1, w, w + 1):
-                b = head[cell + d]
-                while b >= 0:
-                    if b != a and (moved[b] == 0 or b > a):  # a pair of two movers: by the lower rank
-                        if m < rows:
-                            cand[c, m, 0], cand[c, m, 1] = a, b
-                        m += 1
-                    b = nxt[b]
+        m = add_neighbours(state, head, moved, movers, lo, lo + found[c], w, cand[c], m)
         if m > rows:
             full += 1
         counts[c] = min(m, rows)
@@ -217,22 +206,15 @@ class ParallelIncrementalGrid(IncrementalGrid):
 
     def _reset(self, positions, radii):
         self._chunked = self.n >= self._parallel_from
+        super()._reset(positions, radii)
+
+    def _new_candidates(self, rows: int) -> None:
         if not self._chunked:
-            super()._reset(positions, radii)
+            super()._new_candidates(rows)
             return
-        n, chunks = self.n, chunk_count()
-        self._start_layout(radii)
-        self._state = new_state(n)
-        self._specialise()
-        self._head = np.empty(0, dtype=np.int64)
-        self._flat = np.empty((4 * n + 64, 2), dtype=np.int64)  # a rebuild's candidates, before they are dealt
-        self._chunk_rows(len(self._flat))
-        self._counts, self._found = np.zeros(chunks, dtype=np.int64), np.zeros(chunks, dtype=np.int64)
-        self._movers = np.empty((n, 2), dtype=np.int64)
-        self._moved = np.zeros(n, dtype=np.uint8)
-        self._m = -1
-        self._moves = 0
-        self._update(positions)
+        self._flat = np.empty((rows, 2), dtype=np.int64)  # a rebuild's candidates, before they are dealt
+        self._chunk_rows(rows)
+        self._counts, self._found = np.zeros(chunk_count(), dtype=np.int64), np.zeros(chunk_count(), dtype=np.int64)
 
     def _chunk_rows(self, m: int) -> None:
         """Candidate and hit rows for m candidates dealt to the chunks, with room for a quarter more."""
