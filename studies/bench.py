@@ -156,10 +156,20 @@ def general_ms(backend: str, traj: Trajectory, seconds: float, counters: list[di
     return f"{tight_loop(backend, traj, seconds, specialise=False)[0]:.4f}"
 
 
+def scalar_ms(backend: str, traj: Trajectory, seconds: float, counters: list[dict]) -> str:
+    """The backend's time with its scalar scan only, where it scanned runs of slots 8 at a time
+    (own/compress.py); "-" where it did not."""
+    if not counters[-1].get("vector"):
+        return "-"
+    return f"{tight_loop(backend, traj, seconds, vector=False)[0]:.4f}"
+
+
 def print_targets(trajectories, seconds: float) -> None:
     print(f"Parallel variants run on {threads()} threads ({threading_layer()} threading layer). 'general ms': the same "
-          f"backend with its general kernels, where it left out a part the scene does not need (specialise=False).")
+          f"backend with its general kernels, where it left out a part the scene does not need (specialise=False). "
+          f"'scalar ms': the same backend scanning one slot at a time, where it scanned 8 at a time (vector=False).")
     print(f"{'n':>9} {'dist':<9} {'backend':<13} {'variant':<20} {'threads':>7} {'measured ms':>12} {'general ms':>11} "
+          f"{'scalar ms':>10} "
           f"{'floor ms':>9} {'x floor':>8} {'ns/pair':>8} {'median pass ms':>15} {'in harness ms':>14} "
           f"{'spatial order ms':>17}")
     verdicts = []
@@ -181,7 +191,8 @@ def print_targets(trajectories, seconds: float) -> None:
             best[used] = min(best[used], (fastest, pick))
             per_pair = f"{fastest * 1e6 / pairs:.1f}" if pairs else "-"
             print(f"{n:>9} {dist:<9} {family:<13} {pick:<20} {used:>7} {fastest:>12.4f} "
-                  f"{general_ms(pick, traj, seconds, counters):>11} {floor:>9.4f} {fastest / floor:>7.1f}x "
+                  f"{general_ms(pick, traj, seconds, counters):>11} {scalar_ms(pick, traj, seconds, counters):>10} "
+                  f"{floor:>9.4f} {fastest / floor:>7.1f}x "
                   f"{per_pair:>8} {median:>15.4f} {harness_ms(pick, traj):>14.4f} "
                   f"{tight_loop(pick, in_space, seconds)[0]:>17.4f}")
             sys.stdout.flush()

@@ -37,6 +37,7 @@ def test_unknown_parameter_is_a_clear_error():
         ("own.grid", {"p": 2.5}, "p must be an integer"),
         ("own.grid", {"cell": -1.0}, "cell must be a positive"),
         ("own.grid", {"p": 4, "cell": 1.0}, "not both"),
+        ("own.grid", {"vector": "yes"}, "vector must be True, False or None"),
         ("own.quadtree", {"capacity": 0}, "capacity must be an integer >= 1"),
         ("own.quadtree", {"max_depth": 27}, "max_depth must be at most 26"),
         ("own.bvh", {"leaf_size": 0}, "leaf_size must be an integer >= 1"),
@@ -88,7 +89,7 @@ def test_update_checks_the_object_count_and_values(name):
 
 
 def test_describe_names_the_parameters():
-    assert engines.create("own.grid", p=16).describe() == "own.grid(cell=None, coherent=True, p=16, specialise=True)"
+    assert engines.create("own.grid", p=16).describe() == "own.grid(cell=None, coherent=True, p=16, specialise=True, vector=None)"
     assert engines.create("own.brute").describe() == "own.brute"
 
 
