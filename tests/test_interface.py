@@ -89,7 +89,8 @@ def test_update_checks_the_object_count_and_values(name):
 
 
 def test_describe_names_the_parameters():
-    assert engines.create("own.grid", p=16).describe() == "own.grid(cell=None, coherent=True, p=16, specialise=True, vector=None)"
+    assert engines.create("own.grid", p=16).describe() == \
+        "own.grid(cell=None, coherent=True, p=16, specialise=True, vector=None)"
     assert engines.create("own.brute").describe() == "own.brute"
 
 

@@ -37,7 +37,7 @@ EXACT = [
     ("own.grid", {"p": 7}),
     ("own.grid", {"cell": 0.3}),  # cells far smaller than most objects: most are "large"
     ("own.grid", {"coherent": False}),
-    ("own.grid", {"vector": True}),  # runs of slots 8 at a time, compressed (on any CPU: correct, if slow without AVX-512)
+    ("own.grid", {"vector": True}),  # 8 slots at a time, compressed (on any CPU: slow without AVX-512)
     ("own.grid", {"vector": True, "specialise": False}),
     ("own.grid", {"vector": False}),  # the scalar scan only
     ("own.grid_incremental", {}),

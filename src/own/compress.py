@@ -5,10 +5,12 @@ bound by its instruction count: per test a store of the pair, the min and max th
 the overlap test, 2.5 ns per test. This one tests 8 candidates with a few vector instructions and
 packs the hits' pairs together with a vector compress (AVX-512's vpcompressq), then stores them
 as one block whose rows past the hits are written again by the next block. On the clustered scene
-at n = 131072 (7 million tests, 5.9 million pairs) own.grid's pair search went from 17.8 to 10.4
-ms. numba has no vector types, so the block is written in LLVM IR with generic intrinsics, which
-LLVM lowers for any CPU; without AVX-512 the compress becomes a loop through the stack, 3x slower
-than the scalar scan, so callers take this path only where `NATIVE` says the CPU has it.
+at n = 131072 (7 million tests, 5.9 million pairs) an own.grid frame went from 18.8 to 11.5 ms
+(`python -m studies.bench`, its scalar ms column), 1.9x the floor.
+
+numba has no vector types, so the block is written in LLVM IR with generic intrinsics, which LLVM
+lowers for any CPU. Without AVX-512 the compress becomes a loop through the stack, 3x slower than
+the scalar scan: own.grid takes this path by default only where `NATIVE` says the CPU has it.
 """
 
 from __future__ import annotations
@@ -111,9 +113,11 @@ def scan_block(typingctx, centres, radius, ids, b, e, box, i, buf, count):
         lo, hi = builder.select(below, js, iv), builder.select(below, iv, js)
         rows = builder.shuffle_vector(lo, hi, ir.Constant(_vec(_I32, 2 * LANES),
                                                           [k // 2 + (LANES if k % 2 else 0) for k in range(2 * LANES)]))
-        row_hit = builder.shuffle_vector(hit, hit, ir.Constant(_vec(_I32, 2 * LANES), [k // 2 for k in range(2 * LANES)]))
+        twice = ir.Constant(_vec(_I32, 2 * LANES), [k // 2 for k in range(2 * LANES)])
+        row_hit = builder.shuffle_vector(hit, hit, twice)
         # In halves of LANES // 2 pairs: one 512-bit vector each, compressed in a register and
-        # stored whole. A compress straight to memory is microcoded on AMD Zen 4 (48 ms here).
+        # stored whole. A compress straight to memory is microcoded on AMD Zen 4: the clustered
+        # scene's pair search took 48 ms that way, 10.5 this way.
         compress = _intrinsic_fn(builder, f"llvm.experimental.vector.compress.v{LANES}i64", _vec(_I64),
                                  [_vec(_I64), _vec(_I1), _vec(_I64)])
         popcount = _intrinsic_fn(builder, "llvm.ctpop.i64", _I64, [_I64])
