@@ -148,20 +148,12 @@ def target_of(n: int, dist: str, floor: float) -> tuple[float | None, float | No
     return (floor * multiple, None, f"{multiple:g}x the floor") if multiple else (None, None, "")
 
 
-def general_ms(backend: str, traj: Trajectory, seconds: float, counters: list[dict]) -> str:
-    """The backend's time with its general kernels, where it ran specialised ones on this scene
-    (its counters name a part it left out); "-" where it did not."""
-    if not any(key.startswith("left_out_") for key in counters[-1]):
-        return "-"
-    return f"{tight_loop(backend, traj, seconds, specialise=False)[0]:.4f}"
-
-
-def scalar_ms(backend: str, traj: Trajectory, seconds: float, counters: list[dict]) -> str:
-    """The backend's time with its scalar scan only, where it scanned runs of slots 8 at a time
-    (own/compress.py); "-" where it did not."""
-    if not counters[-1].get("vector"):
-        return "-"
-    return f"{tight_loop(backend, traj, seconds, vector=False)[0]:.4f}"
+def ms_without(backend: str, traj: Trajectory, seconds: float, used: bool, **params) -> str:
+    """The backend's time with `params` turning off a part it `used` on this scene; "-" where it
+    did not use it. The parts: kernels specialised for the scene (its counters name a part it
+    left out; specialise=False runs the general ones) and the vector scan (counter `vector`;
+    vector=False scans one slot at a time, own/compress.py)."""
+    return f"{tight_loop(backend, traj, seconds, **params)[0]:.4f}" if used else "-"
 
 
 def print_targets(trajectories, seconds: float) -> None:
@@ -188,10 +180,13 @@ def print_targets(trajectories, seconds: float) -> None:
             measured = {v: tight_loop(v, traj, seconds) for v in variants}
             pick = min(measured, key=lambda v: measured[v][:2])  # fastest pass first; the median pass breaks ties
             fastest, median, counters = measured[pick]
+            last = counters[-1]
+            left_out = any(key.startswith("left_out_") for key in last)
             best[used] = min(best[used], (fastest, pick))
             per_pair = f"{fastest * 1e6 / pairs:.1f}" if pairs else "-"
             print(f"{n:>9} {dist:<9} {family:<13} {pick:<20} {used:>7} {fastest:>12.4f} "
-                  f"{general_ms(pick, traj, seconds, counters):>11} {scalar_ms(pick, traj, seconds, counters):>10} "
+                  f"{ms_without(pick, traj, seconds, left_out, specialise=False):>11} "
+                  f"{ms_without(pick, traj, seconds, bool(last.get('vector')), vector=False):>10} "
                   f"{floor:>9.4f} {fastest / floor:>7.1f}x "
                   f"{per_pair:>8} {median:>15.4f} {harness_ms(pick, traj):>14.4f} "
                   f"{tight_loop(pick, in_space, seconds)[0]:>17.4f}")
