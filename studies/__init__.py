@@ -8,6 +8,7 @@ COMMANDS = {
     "show": "a picture of what a broad phase does on a scene",
     "essay": "the essay's experiments and open questions, redone",
     "stress": "stiff and extreme scenes: which backend breaks, and how",
+    "scenes": "every backend on every scene family, the essay's motion and recorded (pile, rain, ...)",
     "scale": "how each backend's cost per frame grows with n, up to 2^20",
     "bench": "our backends against the speed targets on this machine",
     "tune": "sweep each backend's parameters on a scene; check our defaults",

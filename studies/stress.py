@@ -23,6 +23,7 @@ import engines
 from scenes import Scene
 from scenes.generate import at_essay_density
 from scenes.io import load_scene, save_scene
+from scenes.recorded import load_trajectory
 from scenes.stress import STRESS_SCENES
 
 from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli, warn_unavailable
@@ -243,14 +244,16 @@ def write_outputs(rows: pd.DataFrame, folder: Path, meta: dict, report_dir: Path
 def chosen_scenes(args) -> list[Scene]:
     patterns = [s.strip() for s in args.scenes.split(",") if s.strip()]
     names = [n for n in STRESS_SCENES if any(fnmatch.fnmatch(n, p) for p in patterns)]
-    if not names and not args.scene:
+    if not names and not args.scene and not args.trajectory:
         raise CliError(f"--scenes {args.scenes!r} matches no stress scene; known: {', '.join(STRESS_SCENES)}")
     scenes = [STRESS_SCENES[n]() for n in names]
-    if args.scene:
-        try:
+    try:
+        if args.scene:
             scenes.append(load_scene(args.scene))
-        except ValueError as exc:
-            raise CliError(str(exc)) from None
+        if args.trajectory:
+            scenes.append(load_trajectory(args.trajectory))
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
     return scenes
 
 

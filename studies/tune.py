@@ -278,8 +278,8 @@ def parse(argv: list[str] | None):
         args.sizes = [int(v) for v in args.sizes.split(",")] if args.sizes else None
     except ValueError:
         raise CliError(f"--sizes must be a comma-separated list of integers, got {args.sizes!r}") from None
-    if args.sizes and (args.scene or min(args.sizes) < 2):
-        raise CliError("--sizes needs a described scene (not --scene) and every n >= 2")
+    if args.sizes and (args.scene or args.trajectory or min(args.sizes) < 2):
+        raise CliError("--sizes needs a described scene (not --scene or --trajectory) and every n >= 2")
     return args
 
 

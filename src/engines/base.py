@@ -3,6 +3,15 @@
 A backend is built from arrays (`reset`), told that the same objects moved (`update`, where
 temporal coherence can pay off) and asked for candidate pairs (`pairs`): an (m, 2) int64 array,
 i < j in every row, no pair twice. What a backend promises about those pairs is in `reports`.
+
+Real scenes have objects that never move and objects that appear and disappear. `reset` takes
+`static` (n,) bool (never moved; two statics are never a pair, as in every engine) and `alive`
+(n,) bool (which objects exist now); `update` takes this frame's `alive`. Objects keep their ids
+(their index) whatever exists: pairs are always in those ids. How a backend takes them is its
+`lifecycle`: "native" backends get the masks and what spawned or went (`self.static`,
+`self.alive`, `self.spawned`, `self.removed`) and handle them with their own means; for the
+others ("rebuild") this class hands the backend only the objects alive (rebuilt when that set
+changes) and drops the pairs of two statics after the search.
 """
 
 from __future__ import annotations
@@ -15,7 +24,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Literal
 import numpy as np
 import numpy.typing as npt
 
-from scenes.scene import check_positions, check_radii
+from scenes.scene import check_mask, check_positions, check_radii
 
 if TYPE_CHECKING:
     from .knobs import Knob
@@ -23,11 +32,14 @@ if TYPE_CHECKING:
 PairArray = npt.NDArray[np.int64]
 
 EMPTY_PAIRS: PairArray = np.empty((0, 2), dtype=np.int64)
+NO_IDS = np.empty(0, dtype=np.int64)
 
 # "boxes": a superset of the pairs whose axis-aligned boxes overlap ("exact" if equal to it);
 # "contacts": the engine ran its own narrow phase first, so only a superset of the truly
 # overlapping circles can be promised (box-only overlaps never reach Python).
 Reports = Literal["boxes", "contacts"]
+# "native": statics and spawning through the backend's own means; "rebuild": see the module docstring.
+Lifecycle = Literal["native", "rebuild"]
 
 
 @dataclass(frozen=True)
@@ -109,6 +121,7 @@ class BroadPhase(ABC):
     method: ClassVar[str] = ""
     breaks: ClassVar[str] = ""
     limits: ClassVar[Limits] = NO_LIMITS
+    lifecycle: ClassVar[Lifecycle] = "rebuild"
 
     def __init__(self, **params: Any) -> None:
         unknown = sorted(set(params) - set(self.defaults))
@@ -120,23 +133,61 @@ class BroadPhase(ABC):
         self.n = 0
         self.radii = np.empty(0)
         self._stats: dict[str, float] = {}
+        self.objects = 0  # every object id, alive or not
+        self.static: np.ndarray | None = None
+        self.alive: np.ndarray | None = None
+        self.spawned = self.removed = NO_IDS  # this frame's, for "native" backends
+        self._ids: np.ndarray | None = None  # "rebuild": the ids of the objects handed to the backend
 
-    def reset(self, positions: npt.ArrayLike, radii: npt.ArrayLike) -> None:
-        """Build from scratch for these objects (positions (n, 2), radii (n,))."""
+    def reset(self, positions: npt.ArrayLike, radii: npt.ArrayLike, static: npt.ArrayLike | None = None,
+              alive: npt.ArrayLike | None = None) -> None:
+        """Build from scratch for these objects (positions (n, 2), radii (n,)); `static` (n,) bool
+        marks objects that never move, `alive` (n,) bool the objects that exist now (default all)."""
         pos = check_positions(positions)
-        radii = check_radii(radii, pos.shape[0])
+        n = pos.shape[0]
+        radii = check_radii(radii, n)
+        self.static, self.alive = check_mask(static, (n,), "static"), check_mask(alive, (n,), "alive")
         self._check_limits(pos, radii)
-        self.radii, self.n = radii, pos.shape[0]
-        self._reset(pos, self.radii)
+        self.objects, self.spawned, self.removed, self._all_radii = n, NO_IDS, NO_IDS, radii
+        self._built = False
+        if self.lifecycle == "native" or (self.static is None and self.alive is None):
+            self._ids = None
+            self.radii, self.n = radii, n
+            self._reset(pos, self.radii)
+        else:
+            self._rebuild(pos)
         self._built = True
 
-    def update(self, positions: npt.ArrayLike) -> None:
-        """The same objects (same radii, same order) moved to `positions`."""
+    def update(self, positions: npt.ArrayLike, alive: npt.ArrayLike | None = None) -> None:
+        """The same objects (same radii, same ids) moved to `positions`; `alive` (n,) bool says
+        which exist now, where objects appear or disappear (None: the same as before)."""
         if not self._built:
             raise RuntimeError(f"{self.name}: call reset(positions, radii) before update()")
-        pos = check_positions(positions, self.n)
+        pos = check_positions(positions, self.objects)
         self._check_limits(pos)
-        self._update(pos)
+        changed = False
+        if alive is not None:
+            alive = check_mask(alive, (self.objects,), "alive")
+            before = self.alive if self.alive is not None else np.ones(self.objects, dtype=bool)
+            changed = not np.array_equal(alive, before)
+            if changed:
+                self.spawned, self.removed = np.flatnonzero(alive & ~before), np.flatnonzero(before & ~alive)
+            self.alive = alive
+        if self._ids is None and (self.lifecycle == "native" or not changed):
+            self._update(pos)
+        elif changed:
+            self._rebuild(pos)
+        else:
+            self._update(pos[self._ids])
+        if changed:
+            self.spawned = self.removed = NO_IDS
+
+    def _rebuild(self, positions: np.ndarray) -> None:
+        """"rebuild" lifecycle: build the backend anew on the objects alive now."""
+        alive = self.alive if self.alive is not None else np.ones(self.objects, dtype=bool)
+        self._ids = np.flatnonzero(alive)
+        self.radii, self.n = self._all_radii[self._ids], len(self._ids)
+        self._reset(np.ascontiguousarray(positions[self._ids]), self.radii)
 
     def _check_limits(self, positions: np.ndarray, radii: np.ndarray | None = None) -> None:
         if self.limits is NO_LIMITS:  # our own backends: no cost per frame
@@ -146,10 +197,17 @@ class BroadPhase(ABC):
             raise ValueError(f"{self.name}: {problem}" + (f" ({self.limits.why})" if self.limits.why else ""))
 
     def pairs(self) -> PairArray:
-        """Candidate pairs for the current positions: (m, 2) int64, i < j, unique."""
+        """Candidate pairs for the current positions: (m, 2) int64, i < j, unique, in object ids;
+        never an object that is not alive, never two statics."""
         if not self._built:
             raise RuntimeError(f"{self.name}: call reset(positions, radii) before pairs()")
-        return self._pairs()
+        found = self._pairs()
+        if self._ids is None:
+            return found
+        found = self._ids[found]  # ids ascend, so i < j still holds
+        if self.static is not None:
+            found = found[~(self.static[found[:, 0]] & self.static[found[:, 1]])]
+        return found
 
     def stats(self) -> dict[str, float]:
         """Work counters of the last build or query (nodes visited, duplicate tests...)."""

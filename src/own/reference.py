@@ -13,8 +13,14 @@ from engines.base import PairArray
 BRUTE_FORCE_LIMIT = 3000
 
 
-def box_pairs(positions: np.ndarray, radii: np.ndarray) -> PairArray:
-    """Every pair whose boxes overlap (closed intervals), sorted by (i, j)."""
+def box_pairs(positions: np.ndarray, radii: np.ndarray, alive: np.ndarray | None = None,
+              static: np.ndarray | None = None) -> PairArray:
+    """Every pair whose boxes overlap (closed intervals), sorted by (i, j); with `alive`, only
+    among the objects alive, and with `static`, never two static objects (no engine pairs them)."""
+    if alive is not None or static is not None:
+        ids = np.flatnonzero(alive) if alive is not None else np.arange(len(positions))
+        found = ids[box_pairs(positions[ids], radii[ids])]
+        return found if static is None else found[~(static[found[:, 0]] & static[found[:, 1]])]
     if len(positions) <= BRUTE_FORCE_LIMIT:
         from .brute import brute_pairs
 

@@ -74,20 +74,23 @@ class SmallScenes:
             if name in cls.__dict__:
                 setattr(cls, name, _unless_small(cls.__dict__[name], answer))
 
-    def reset(self, positions, radii) -> None:
+    def reset(self, positions, radii, static=None, alive=None) -> None:
         pos = check_positions(positions)
         radii = check_radii(radii, pos.shape[0])
-        if pos.shape[0] > self.small_scene_n:
-            self._small = None
-            super().reset(pos, radii)
+        if pos.shape[0] > self.small_scene_n or static is not None or alive is not None:
+            self._small = None  # statics and spawning go the base class's way (BroadPhase.lifecycle)
+            super().reset(pos, radii, static, alive)
             return
-        self.radii, self.n, self._small, self._built = radii, pos.shape[0], pos, True
+        self.radii, self.n, self.objects, self._small, self._built = radii, pos.shape[0], pos.shape[0], pos, True
         self._order, self._lo = np.arange(self.n, dtype=np.int64), np.empty(self.n)
         self._stats = {"small_scene": 1}
 
-    def update(self, positions) -> None:
+    def update(self, positions, alive=None) -> None:
         if self._small is None:
-            super().update(positions)
+            super().update(positions, alive)
+        elif alive is not None:  # objects appear or go: from now on, the base class's way
+            self._small = None
+            super().reset(positions, self.radii, None, alive)
         else:
             self._small = check_positions(positions, self.n)
 

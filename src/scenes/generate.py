@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .families import FAMILIES, family_scene
 from .scene import ESSAY_BOX, Scene, check_box
 
 ESSAY_SPEED = 10.0  # px per second, random direction
@@ -70,6 +71,9 @@ def _place(dist: str, rng: np.random.Generator, n: int, box, clusters: int) -> n
 
 
 DISTRIBUTIONS: tuple[str, ...] = ("uniform", "gauss_x", "gauss_y", "clusters")
+# Every scene kind `--dist` takes: the essay's placements (moved by the essay's motion) and the
+# families recorded with a real engine (scenes/families.py).
+SCENE_KINDS: tuple[str, ...] = DISTRIBUTIONS + FAMILIES
 
 
 def generate(
@@ -92,9 +96,13 @@ def generate(
     log-uniform between the bounds. Every circle starts at `speed` in a random direction.
     `box=None` sizes a square box from the origin so that the objects' boxes cover the same share
     of it as in the essay's scene (`ESSAY_COVERAGE`).
+    A family of FAMILIES is recorded with pymunk instead (`family_scene`: radii from `radius` or
+    `radii`, default 4 to 8; its own box and motion, so `box`, `speed` and the flags do not apply).
     """
+    if dist in FAMILIES:
+        return family_scene(dist, n, seed, radii if radius is None else (radius, radius))
     if dist not in DISTRIBUTIONS:
-        raise ValueError(f"unknown distribution {dist!r}; choose one of {', '.join(DISTRIBUTIONS)}")
+        raise ValueError(f"unknown distribution {dist!r}; choose one of {', '.join(SCENE_KINDS)}")
     if int(n) != n or n < 0:
         raise ValueError(f"n must be a non-negative integer, got {n!r}")
     if radius is not None and radii is not None:
@@ -119,6 +127,9 @@ def generate(
 
 
 def at_essay_density(dist: str, n: int, seed: int = 0) -> Scene:
-    """The essay's density at any n: 2048 circles of radius 10 per 2000 x 2000, the box scaled."""
+    """The essay's density at any n: 2048 circles of radius 10 per 2000 x 2000, the box scaled
+    (a recorded family at its own density)."""
+    if dist in FAMILIES:
+        return family_scene(dist, n, seed)
     side = ESSAY_BOX[2] * float(np.sqrt(max(n, 1) / 2048))
     return generate(dist, n, seed=seed, box=(0.0, 0.0, side, side))

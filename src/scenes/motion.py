@@ -111,13 +111,18 @@ class FramePairs(Sequence):
 
 @dataclass(frozen=True)
 class Trajectory:
-    """Frames of one scene: positions (frames, n, 2), plus the exact pairs of each frame."""
+    """Frames of one scene: positions (frames, n, 2), plus the exact pairs of each frame; `alive`
+    (frames, n) says which objects exist in each frame (None: all of them, always)."""
 
     scene: Scene
     positions: np.ndarray
     box_pairs: FramePairs  # None for frames not verified
     contacts: FramePairs
     velocities: np.ndarray  # (frames, n, 2), the velocity at the start of each frame
+    alive: np.ndarray | None = None
+
+    def alive_at(self, frame: int) -> np.ndarray | None:
+        return None if self.alive is None else self.alive[frame]
 
     @property
     def frames(self) -> int:
@@ -126,7 +131,8 @@ class Trajectory:
     def head(self, frames: int) -> "Trajectory":
         """The first `frames` frames (for shorter trials on the same scene)."""
         k = max(1, min(frames, self.frames))
-        return Trajectory(self.scene, self.positions[:k], self.box_pairs[:k], self.contacts[:k], self.velocities[:k])
+        return Trajectory(self.scene, self.positions[:k], self.box_pairs[:k], self.contacts[:k], self.velocities[:k],
+                          None if self.alive is None else self.alive[:k])
 
     def renumbered(self, order: np.ndarray) -> "Trajectory":
         """The same motion with the objects renumbered: new object k is old object order[k]
@@ -144,12 +150,14 @@ class Trajectory:
             p = np.sort(new_of[pairs], axis=1)
             return p[np.lexsort((p[:, 1], p[:, 0]))]
 
+        static = None if self.scene.static is None else self.scene.static[order]
         scene = self.scene.with_(positions=self.scene.positions[order], radii=self.scene.radii[order],
-                                 velocities=self.scene.velocities[order])
+                                 velocities=self.scene.velocities[order], static=static)
         return Trajectory(scene, np.ascontiguousarray(self.positions[:, order]),
                           FramePairs([None if p is None else mapped(p) for p in self.box_pairs]),
                           FramePairs([None if p is None else mapped(p) for p in self.contacts]),
-                          np.ascontiguousarray(self.velocities[:, order]))
+                          np.ascontiguousarray(self.velocities[:, order]),
+                          None if self.alive is None else np.ascontiguousarray(self.alive[:, order]))
 
     @cached_property
     def swept_contacts(self) -> np.ndarray:
@@ -185,6 +193,8 @@ def simulate(scene: Scene, frames: int, dt: float = FRAME_DT, verify: Collection
         raise ValueError(f"dt must be positive and finite, got {dt!r}")
     # A scene with the essay's response computes every frame's contacts for its motion anyway;
     # only the verified frames' are kept.
+    if scene.motion is not None:
+        return replay(scene, frames, dt, verify)
     verified = set(range(frames)) if verify is None else {int(f) for f in verify if 0 <= f < frames}
     on_disk = scene.n > SAMPLE and costs(scene, frames, len(verified)).on_disk
     boxes, contacts = (FramePairs.in_folder(frames), FramePairs.in_folder(frames)) if on_disk else \
@@ -213,6 +223,27 @@ def simulate(scene: Scene, frames: int, dt: float = FRAME_DT, verify: Collection
                 respond(pos, vel, scene.radii, touching)
             move(pos, vel, scene.radii, dt, box, scene.walls)
     return Trajectory(scene, out_pos, boxes, contacts, out_vel)
+
+
+def replay(scene: Scene, frames: int, dt: float = FRAME_DT, verify: Collection[int] | None = None) -> Trajectory:
+    """The scene's recorded motion (`scene.motion`), at most `frames` frames of it (a file has the
+    frames it has), with the exact pairs of the verified frames among the objects alive in each,
+    never two statics. Velocities are the recorded steps over dt."""
+    record = scene.motion.record(frames)
+    frames = record.frames
+    verified = set(range(frames)) if verify is None else {int(f) for f in verify if 0 <= f < frames}
+    on_disk = scene.n > SAMPLE and costs(scene, frames, len(verified)).on_disk
+    boxes, contacts = (FramePairs.in_folder(frames), FramePairs.in_folder(frames)) if on_disk else \
+        (FramePairs([None] * frames), FramePairs([None] * frames))
+    for f in tqdm(sorted(verified), desc="exact pairs of the recorded frames", unit="frame", delay=2,
+                  file=sys.stderr, leave=False):
+        pos = record.positions[f]
+        found = box_pairs(pos, scene.radii, None if record.alive is None else record.alive[f], scene.static)
+        boxes.store(f, found, "boxes")
+        contacts.store(f, narrow_phase(pos, scene.radii, found), "contacts")
+    velocities = np.zeros_like(record.positions)
+    velocities[:-1] = np.diff(record.positions, axis=0) / dt
+    return Trajectory(scene, record.positions, boxes, contacts, velocities, record.alive)
 
 
 def kinetic_energy(velocities: np.ndarray, radii: np.ndarray) -> float:

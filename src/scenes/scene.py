@@ -82,11 +82,29 @@ def check_box(box: object) -> tuple[float, float, float, float]:
     return xmin, ymin, xmax, ymax
 
 
+def check_mask(mask: object, shape: tuple[int, ...], what: str) -> np.ndarray | None:
+    """`mask` as a contiguous bool array of `shape` (None stays None), or a ValueError naming the problem."""
+    if mask is None:
+        return None
+    arr = np.asarray(mask)
+    if arr.shape != shape:
+        raise ValueError(f"{what} must have shape {shape}, one flag per object, got {arr.shape}")
+    if arr.dtype != np.bool_:
+        if arr.dtype.kind not in "iu" or ((arr != 0) & (arr != 1)).any():
+            raise ValueError(f"{what} must be booleans (or 0 and 1), got {arr.dtype} values")
+        arr = arr.astype(np.bool_)
+    return np.ascontiguousarray(arr)
+
+
 @dataclass(frozen=True)
 class Scene:
     """n circles: centres (n, 2), radii (n,), velocities (n, 2) in units per second, and the box.
 
     The flags say which parts of the essay's motion the scene uses; stepping does only those.
+    `static` (n,) bool marks objects that never move (two statics are never a pair); `motion`,
+    where given, is recorded motion (`scenes.recorded.Recording`, or a family recorded with an
+    engine) that replaces the essay's: its `record(frames)` gives the frames, which objects are
+    alive in each, and `digest()` names them.
     """
 
     positions: FloatArray
@@ -98,6 +116,8 @@ class Scene:
     walls: bool = True
     responds: bool = True
     meta: dict = field(default_factory=dict, compare=False)
+    static: np.ndarray | None = field(default=None, compare=False)
+    motion: object | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         pos = check_positions(self.positions)
@@ -106,10 +126,16 @@ class Scene:
         object.__setattr__(self, "radii", check_radii(self.radii, n))
         object.__setattr__(self, "velocities", check_positions(self.velocities, n, what="velocities"))
         object.__setattr__(self, "box", check_box(self.box))
+        object.__setattr__(self, "static", check_mask(self.static, (n,), "static"))
 
     @property
     def n(self) -> int:
         return int(self.positions.shape[0])
+
+    @property
+    def static_share(self) -> float:
+        """The share of objects that never move."""
+        return float(self.static.mean()) if self.static is not None and self.n else 0.0
 
     @property
     def radius_range(self) -> tuple[float, float]:

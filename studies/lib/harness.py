@@ -89,6 +89,10 @@ def scene_id(scene: Scene) -> str:
     for array in (scene.positions, scene.radii, scene.velocities):
         digest.update(np.ascontiguousarray(array).tobytes())
     digest.update(repr((scene.box, scene.moves, scene.walls, scene.responds)).encode())
+    if scene.static is not None:
+        digest.update(np.packbits(scene.static).tobytes())
+    if scene.motion is not None:
+        digest.update(scene.motion.digest().encode())
     return f"{scene.name}#{digest.hexdigest()[:12]}"
 
 
@@ -137,7 +141,7 @@ def measure(job: Job, traj: Trajectory, repeat: int, ready: Callable[[], None] |
     failed = True
     try:
         start = time.perf_counter()
-        backend.reset(traj.positions[0], radii)
+        backend.reset(traj.positions[0], radii, static=traj.scene.static, alive=traj.alive_at(0))
         backend.update(traj.positions[0])
         first = _checked(backend.pairs(), traj.scene.n)
         narrow_phase(traj.positions[0], radii, first)
@@ -150,9 +154,9 @@ def measure(job: Job, traj: Trajectory, repeat: int, ready: Callable[[], None] |
         gc.disable()  # a collection inside a timed frame would be noise, not the backend's cost
         try:
             for f in range(1, traj.frames):
-                pos = traj.positions[f]
+                pos, alive = traj.positions[f], traj.alive_at(f)
                 t0 = time.perf_counter()
-                backend.update(pos)
+                backend.update(pos, alive)
                 t1 = time.perf_counter()
                 candidates = backend.pairs()
                 t2 = time.perf_counter()

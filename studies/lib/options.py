@@ -7,6 +7,7 @@ written from them. A study that needs something else gets a new name (recommend'
 - `--n --dist --radius --radii --speed --seed --box`: a generated scene (its box at the essay's coverage unless
   `--box` is given)
 - `--scene FILE.csv`: your own scene file (stress adds it to its scenes)
+- `--trajectory FILE`: your own recorded frames (.npz or long-form .csv; stress adds it too)
 - `--backends PATTERN[,PATTERN]`: which backends, as globs over the registry
 - `--frames F`: timed frames per run, after one untimed warm-up frame
 - `--repeat R`: independent repeats per run
@@ -25,8 +26,9 @@ from __future__ import annotations
 
 import argparse
 
-from scenes import DISTRIBUTIONS, ESSAY_COVERAGE, Scene, generate
+from scenes import DISTRIBUTIONS, ESSAY_COVERAGE, FAMILIES, SCENE_KINDS, Scene, generate
 from scenes.io import load_scene
+from scenes.recorded import load_trajectory
 
 from .cli import CliError
 from .pool import add_cluster_options, check_cluster_options
@@ -37,7 +39,9 @@ TRIAL_OPTIONS = ("frames", "repeat", "budget", "timeout", "memory")
 def add_scene_options(parser: argparse.ArgumentParser, n: int = 2048) -> None:
     g = parser.add_argument_group("scene")
     g.add_argument("--n", type=int, default=n, help=f"number of circles (default {n})")
-    g.add_argument("--dist", choices=DISTRIBUTIONS, default="uniform", help="placement (default uniform)")
+    g.add_argument("--dist", choices=SCENE_KINDS, default="uniform",
+                   help=f"placement moved by the essay's motion ({', '.join(DISTRIBUTIONS)}), or a family recorded "
+                        f"with pymunk ({', '.join(FAMILIES)}; radii 4:8 unless given) (default uniform)")
     sizes = g.add_mutually_exclusive_group()
     sizes.add_argument("--radius", type=float, help="equal radii (default 10, the essay's)")
     sizes.add_argument("--radii", metavar="MIN:MAX", help="mixed sizes, log-uniform between MIN and MAX")
@@ -51,13 +55,19 @@ def add_scene_options(parser: argparse.ArgumentParser, n: int = 2048) -> None:
 
 def add_scene_file_option(parser) -> None:
     """--scene: the user's own scene (in place of a generated one; the stress study adds it to its set)."""
-    parser.add_argument("--scene", metavar="FILE.csv", help="your own scene: a CSV file with columns x,y,r and "
-                                                             "optional vx,vy (see the README)")
+    files = parser.add_mutually_exclusive_group()
+    files.add_argument("--scene", metavar="FILE.csv", help="your own scene: a CSV file with columns x,y,r and "
+                                                            "optional vx,vy (see the README)")
+    files.add_argument("--trajectory", metavar="FILE", help="your own recorded frames: .npz with positions, radii "
+                                                             "and optional alive, static, box, or a .csv with columns "
+                                                             "frame,id,x,y,r and optional static (see the README)")
 
 
 def scene_from_args(args: argparse.Namespace) -> Scene:
     """The scene the options describe; bad values become CliError."""
     try:
+        if getattr(args, "trajectory", None):
+            return load_trajectory(args.trajectory)
         if args.scene:
             return load_scene(args.scene)
         radii = None
@@ -68,6 +78,8 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
                 raise CliError(f"--radii must look like MIN:MAX (e.g. 1:100), got {args.radii!r}") from None
             radii = (lo, hi)
         box = None if args.box is None else (0.0, 0.0, args.box, args.box)
+        if args.dist in FAMILIES and box is not None:
+            raise CliError(f"--box does not apply to the {args.dist} family: it has its own container")
         return generate(args.dist, args.n, radius=args.radius, radii=radii, seed=args.seed, speed=args.speed, box=box)
     except ValueError as exc:
         raise CliError(str(exc)) from None

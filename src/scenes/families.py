@@ -1,0 +1,350 @@
+"""Scene families simulated by a real engine (Chipmunk, through pymunk), modelled on Box2D v3's
+own benchmark set, recorded once per (family, n, seed, radii) and cached on disk.
+
+Each family has a trait the essay's motion lacks (recommend names them; `TRAITS`):
+- `pile`: circles dropped into a container settle under gravity (Box2D's barrel): resting
+  contact, most objects jittering by a fraction of a radius per frame, a few still falling.
+- `rain`: groups of circles spawned at the top fall onto a static ground of small circles (a
+  quarter of the slots) and are removed 100 to 160 frames later, as in Box2D's rain: the objects
+  alive change every frame.
+- `tumbler`: a rotating box holding circles (Box2D's tumbler): everything moves, a few fast.
+- `smash`: zero gravity, a heavy circle ten times the others' radius at speed through a resting
+  block (Box2D's smash): one large fast object among resting ones.
+- `level`: a static board of pegs (80% of the objects) with balls falling through it, put back at
+  the top once they leave the bottom: most objects static, the movers teleported.
+
+Frame 0 is taken after a warm-up (the pile has landed, rain is at its steady state); every
+recorded frame is one 1/60 s step of the simulation (two substeps). pymunk is deterministic for
+the same calls, and the cached file is what every later run reads.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from .recorded import Recording, fill_absent
+from .scene import Scene, check_box
+
+FAMILIES: tuple[str, ...] = ("pile", "rain", "tumbler", "smash", "level")
+TRAITS: dict[str, str] = {
+    "pile": "resting contact (objects jitter in place under gravity)",
+    "rain": "spawning and removal every few frames over a static ground",
+    "tumbler": "everything in motion in a rotating container",
+    "smash": "one large fast object through a resting block",
+    "level": "most objects static, movers falling through them",
+}
+DEFAULT_RADII = (4.0, 8.0)
+FIRST_FRAMES = 32  # recorded when the scene is made; more are recorded when a study asks for them
+STEP_DT, SUBSTEPS = 1.0 / 60.0, 2
+GRAVITY = 900.0  # units per s^2, with radii of a few units: pixels, as in a 2-D game
+VERSION = 1  # part of the cache's file names: a change of any family's recipe changes it
+# A group of 1/40 of the rain's slots every 4 frames, each drop removed after 100 to 160 frames
+# (Box2D's rain: a column every 8 steps, the oldest of 40 destroyed): about 80% of the slots alive.
+RAIN_GROUPS, RAIN_PERIOD, RAIN_LIFE = 40, 4, (100, 160)
+LEVEL_STATIC_SHARE = 0.8
+
+
+def cache_dir() -> Path:
+    """Where recorded families are kept: $BROADPHASE_CACHE, else the user's cache folder."""
+    root = os.environ.get("BROADPHASE_CACHE") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "broadphase-study")
+    return Path(root) / "families"
+
+
+@dataclass(frozen=True)
+class FamilyMotion:
+    """The motion of one family scene, recorded with pymunk on first use and read from the cache after."""
+
+    family: str
+    n: int
+    seed: int
+    radii: tuple[float, float]
+
+    @property
+    def stem(self) -> str:
+        return f"{self.family}-v{VERSION}-n{self.n}-s{self.seed}-r{self.radii[0]:g}-{self.radii[1]:g}"
+
+    def digest(self) -> str:
+        return self.stem
+
+    @property
+    def frames(self) -> int:
+        return max((_frames_of(p) for p in cache_dir().glob(self.stem + "-f*.npz")), default=0)
+
+    def record(self, frames: int) -> Recording:
+        """The first `frames` frames, from the cache when a recording at least that long is there."""
+        cached = sorted((p for p in cache_dir().glob(self.stem + "-f*.npz") if _frames_of(p) >= frames),
+                        key=_frames_of)
+        for path in cached:
+            try:
+                with np.load(path) as data:
+                    alive = data["alive"] if "alive" in data.files else None
+                    return Recording(data["positions"][:frames], None if alive is None else alive[:frames],
+                                     f"pymunk {self.family}").record(frames)
+            except (OSError, ValueError, KeyError):
+                path.unlink(missing_ok=True)  # a torn file: record again
+        return self._simulate(max(frames, FIRST_FRAMES))[1].record(frames)
+
+    def _simulate(self, frames: int) -> tuple[dict, Recording]:
+        fields = RECIPES[self.family](self.n, np.random.default_rng(self.seed), self.radii, frames)
+        folder = cache_dir()
+        folder.mkdir(parents=True, exist_ok=True)
+        path = folder / f"{self.stem}-f{frames}.npz"
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.stem}.", suffix=".npz")
+        os.close(fd)
+        try:
+            np.savez(tmp, **{k: v for k, v in fields.items() if v is not None})
+            os.replace(tmp, path)
+        finally:
+            Path(tmp).unlink(missing_ok=True)
+        return fields, Recording(fields["positions"], fields.get("alive"), f"pymunk {self.family}")
+
+
+def _frames_of(path: Path) -> int:
+    return int(path.stem.rsplit("-f", 1)[1])
+
+
+def family_scene(family: str, n: int, seed: int = 0, radii: tuple[float, float] | None = None) -> Scene:
+    """A scene of `family` with n objects (slots, for rain), circles of radii uniform in `radii`."""
+    if family not in FAMILIES:
+        raise ValueError(f"unknown family {family!r}; choose one of {', '.join(FAMILIES)}")
+    if int(n) != n or n < 2:
+        raise ValueError(f"a {family} scene needs n >= 2 objects, got {n!r}")
+    lo, hi = (float(v) for v in (radii or DEFAULT_RADII))
+    if not (0 < lo <= hi and math.isfinite(hi)):
+        raise ValueError(f"radii bounds must satisfy 0 < min <= max, got {radii!r}")
+    motion = FamilyMotion(family, int(n), int(seed), (lo, hi))
+    record = motion.record(FIRST_FRAMES)
+    static = _static_of(family, int(n))
+    fields = _layout(family, int(n), np.random.default_rng(seed), (lo, hi))
+    return Scene(record.positions[0], fields["radii"], np.zeros((int(n), 2)), box=check_box(fields["box"]),
+                 name=f"{family}-n{n}-r{lo:g}-{hi:g}-s{seed}", walls=False, responds=False, static=static,
+                 motion=motion, meta={"dist": family, "seed": seed, "speed": ""})
+
+
+# ---- the recipes: layout (radii, box, who is static) and the simulation --------------------------
+
+def _static_of(family: str, n: int) -> np.ndarray | None:
+    count = {"rain": n // 4, "level": int(LEVEL_STATIC_SHARE * n)}.get(family, 0)
+    if not count:
+        return None
+    static = np.zeros(n, dtype=bool)
+    static[:count] = True  # statics first: slots 0..count-1
+    return static
+
+
+def _layout(family: str, n: int, rng: np.random.Generator, radii: tuple[float, float]) -> dict:
+    """Radii and box of a family scene (the same draws as its simulation makes first)."""
+    lo, hi = radii
+    r = rng.uniform(lo, hi, n)
+    statics = _static_of(family, n)
+    if statics is not None:
+        r[statics] = lo
+    if family == "smash":
+        r[-1] = 10.0 * hi  # the projectile
+    mean_area = math.pi * float(np.mean(r * r))
+    if family == "pile":
+        width = math.sqrt(2.0 * n * mean_area / 0.8)  # a pile about half as high as wide
+        box = (0.0, 0.0, width, 2.5 * width)
+    elif family == "rain":
+        width = math.sqrt(3.0 * n * mean_area / 0.5)
+        box = (0.0, -4.0 * hi, width, 0.6 * width)
+    elif family == "tumbler":
+        side = math.sqrt(n * mean_area / 0.45)
+        half = side * math.sqrt(0.5) + hi
+        box = (-half, -half, half, half)
+    elif family == "smash":
+        cols = int(math.ceil(math.sqrt(1.5 * n)))
+        width = cols * 2.0 * hi
+        box = (-0.6 * width, -0.2 * width, 1.1 * width, 0.9 * width)
+    else:  # level
+        spacing = 4.0 * hi
+        cols = int(math.ceil(math.sqrt(int(LEVEL_STATIC_SHARE * n))))
+        width = cols * spacing
+        box = (-spacing, -spacing, width + spacing, width + 3 * spacing)
+    return {"radii": r, "box": box, "static": statics}
+
+
+def _space(gravity: float):
+    import pymunk
+
+    space = pymunk.Space()
+    space.gravity = (0.0, -gravity)
+    space.iterations = 10
+    return space
+
+
+def _ball(space, x: float, y: float, r: float, static: bool = False, mass_scale: float = 1.0):
+    import pymunk
+
+    body = pymunk.Body(body_type=pymunk.Body.STATIC) if static else pymunk.Body(
+        mass_scale * r * r, pymunk.moment_for_circle(mass_scale * r * r, 0, r))
+    body.position = (x, y)
+    shape = pymunk.Circle(body, r)
+    shape.friction, shape.elasticity = 0.5, 0.1
+    space.add(body, shape)
+    return body
+
+
+def _walls(space, corners: list[tuple[float, float]], body=None, thickness: float = 4.0):
+    import pymunk
+
+    body = body or space.static_body
+    for a, b in zip(corners, corners[1:]):
+        seg = pymunk.Segment(body, a, b, thickness)
+        seg.friction, seg.elasticity = 0.5, 0.1
+        space.add(seg)
+
+
+def _step(space) -> None:
+    for _ in range(SUBSTEPS):
+        space.step(STEP_DT / SUBSTEPS)
+
+
+def _run(space, bodies: list, frames: int, warmup: int, what: str, every_frame=None) -> np.ndarray:
+    """Warm up, then record `frames` frames of the bodies' positions (a hook may act each frame)."""
+    out = np.empty((frames, len(bodies), 2))
+    for f in tqdm(range(warmup + frames), desc=f"recording the {what} scene with pymunk", unit="frame", delay=2,
+                  leave=False):
+        if every_frame is not None:
+            every_frame(f - warmup)
+        if f >= warmup:
+            out[f - warmup] = [tuple(b.position) for b in bodies]
+        _step(space)
+    return out
+
+
+def _lattice(count: int, x0: float, y0: float, cols: int, spacing: float, rng, jitter: float) -> np.ndarray:
+    k = np.arange(count)
+    xy = np.column_stack([x0 + (k % cols) * spacing, y0 + (k // cols) * spacing])
+    return xy + rng.uniform(-jitter, jitter, xy.shape)
+
+
+def _pile(n, rng, radii, frames):
+    lay = _layout("pile", n, rng, radii)
+    r, (x0, _, x1, _) = lay["radii"], lay["box"]
+    space = _space(GRAVITY)
+    _walls(space, [(x0, 2.5 * (x1 - x0)), (x0, 0.0), (x1, 0.0), (x1, 2.5 * (x1 - x0))])
+    spacing = 2.1 * radii[1]
+    cols = max(1, int((x1 - x0 - spacing) / spacing))
+    xy = _lattice(n, x0 + spacing, spacing, cols, spacing, rng, 0.05 * radii[1])
+    bodies = [_ball(space, x, y, rad) for (x, y), rad in zip(xy, r)]
+    height = xy[:, 1].max()
+    warmup = int(1.5 * math.sqrt(2.0 * height / GRAVITY) / STEP_DT) + 30  # landed, still settling
+    return {"positions": _run(space, bodies, frames, warmup, "pile"), "radii": r, "box": lay["box"]}
+
+
+def _rain(n, rng, radii, frames):
+    lay = _layout("rain", n, rng, radii)
+    r, static, (x0, y0, x1, y1) = lay["radii"], lay["static"], lay["box"]
+    space = _space(GRAVITY)
+    statics = int(static.sum())
+    spacing = 2.0 * radii[0]
+    cols = max(1, int((x1 - x0) / spacing))
+    ground = _lattice(statics, x0 + radii[0], y0 + radii[0], cols, spacing, rng, 0.0)
+    _walls(space, [(x0, y1), (x0, y0), (x1, y0), (x1, y1)])
+    bodies: list = [_ball(space, x, y, rad, static=True) for (x, y), rad in zip(ground, r[:statics])]
+    positions = np.zeros((frames, n, 2))
+    positions[:, :statics] = ground
+    alive = np.zeros((frames, n), dtype=bool)
+    alive[:, :statics] = True
+    group = max(1, (n - statics) // RAIN_GROUPS)
+    live: dict[int, tuple[object, int]] = {}  # slot -> (body, frame it goes)
+    g_spacing = 2.1 * radii[1]
+    size = int(math.ceil(math.sqrt(group)))
+
+    def spawn(frame: int) -> None:
+        free = [k for k in range(statics, n) if k not in live][:group]
+        left = rng.uniform(x0 + g_spacing, max(x0 + g_spacing, x1 - (size + 1) * g_spacing))
+        xy = _lattice(len(free), left, y1 - (size + 1) * g_spacing, size, g_spacing, rng, 0.05 * radii[1])
+        ends = frame + rng.integers(RAIN_LIFE[0], RAIN_LIFE[1], len(free))
+        for k, (x, y), end in zip(free, xy, ends):
+            live[k] = (_ball(space, x, y, r[k]), int(end))
+
+    warmup = RAIN_GROUPS * RAIN_PERIOD
+    for f in tqdm(range(-warmup, frames), desc="recording the rain scene with pymunk", unit="frame", delay=2,
+                  leave=False):
+        if (f + warmup) % RAIN_PERIOD == 0:  # into the slots free before this frame's removals
+            spawn(f)
+        for k in [k for k, (_, end) in live.items() if end <= f]:
+            body = live.pop(k)[0]
+            space.remove(body, *body.shapes)
+        if f >= 0:
+            for k, (body, _) in live.items():
+                positions[f, k] = tuple(body.position)
+            alive[f, list(live)] = True
+        _step(space)
+    return {"positions": fill_absent(positions, alive), "alive": alive, "radii": r, "box": lay["box"]}
+
+
+def _tumbler(n, rng, radii, frames):
+    import pymunk
+
+    lay = _layout("tumbler", n, rng, radii)
+    r, half = lay["radii"], lay["box"][2] - radii[1]
+    side = half / math.sqrt(0.5)
+    space = _space(GRAVITY)
+    drum = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+    drum.angular_velocity = math.radians(25.0)
+    space.add(drum)
+    h = 0.5 * side
+    _walls(space, [(-h, -h), (h, -h), (h, h), (-h, h), (-h, -h)], body=drum)
+    spacing = 2.05 * radii[1]
+    cols = max(1, int((side - 2 * spacing) / spacing))
+    xy = _lattice(n, -h + spacing, -h + spacing, cols, spacing, rng, 0.05 * radii[1])
+    bodies = [_ball(space, x, y, rad) for (x, y), rad in zip(xy, r)]
+    return {"positions": _run(space, bodies, frames, 60, "tumbler"), "radii": r, "box": lay["box"]}
+
+
+def _smash(n, rng, radii, frames):
+    lay = _layout("smash", n, rng, radii)
+    r = lay["radii"]
+    space = _space(0.0)
+    block = n - 1
+    cols = int(math.ceil(math.sqrt(1.5 * block)))
+    spacing = 2.0 * radii[1]
+    xy = _lattice(block, 0.0, 0.0, cols, spacing, rng, 0.0)
+    bodies = [_ball(space, x, y, rad) for (x, y), rad in zip(xy, r[:block])]
+    big = r[-1]
+    rows = math.ceil(block / cols)
+    projectile = _ball(space, -big - 10 * spacing, 0.5 * rows * spacing, big, mass_scale=10.0)
+    projectile.velocity = (100.0 * spacing, 0.0)  # Box2D's smash: 40 m/s for squares of 0.4
+    bodies.append(projectile)
+    return {"positions": _run(space, bodies, frames, 5, "smash"), "radii": r, "box": lay["box"]}
+
+
+def _level(n, rng, radii, frames):
+    lay = _layout("level", n, rng, radii)
+    r, static, (x0, y0, x1, y1) = lay["radii"], lay["static"], lay["box"]
+    space = _space(GRAVITY)
+    statics = int(static.sum())
+    spacing = 4.0 * radii[1]
+    cols = int(math.ceil(math.sqrt(statics)))
+    pegs = _lattice(statics, 0.0, 0.0, cols, spacing, rng, 0.0)
+    pegs[(np.arange(statics) // cols) % 2 == 1, 0] += 0.5 * spacing  # staggered rows
+    bodies = [_ball(space, x, y, rad, static=True) for (x, y), rad in zip(pegs, r[:statics])]
+    movers = n - statics
+    top = pegs[:, 1].max() + spacing
+    holes = _lattice(movers, 0.25 * spacing, 0.5 * spacing, cols, spacing,  rng, 0.0)
+    holes[:, 1] = holes[:, 1] * (top / max(holes[:, 1].max(), 1.0))
+    bodies += [_ball(space, x, y, rad) for (x, y), rad in zip(holes, r[statics:])]
+    width = cols * spacing
+
+    def recycle(_frame: int) -> None:
+        for body in bodies[statics:]:
+            if body.position.y < -spacing:  # out of the bottom: back in at the top
+                body.position = (float(rng.uniform(0.0, width)), top)
+                body.velocity = (0.0, 0.0)
+
+    positions = _run(space, bodies, frames, 60, "level", every_frame=recycle)
+    return {"positions": positions, "radii": r, "box": lay["box"]}
+
+
+RECIPES = {"pile": _pile, "rain": _rain, "tumbler": _tumbler, "smash": _smash, "level": _level}

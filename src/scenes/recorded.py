@@ -1,0 +1,235 @@
+"""Motion recorded elsewhere: every frame's positions, which objects exist, which never move.
+
+A `Recording` is what a simulation of a real project looks like to a broad phase: objects in
+resting contact jitter, some never move (`static`), some appear and disappear (`alive`). Object
+ids are slots: the object in slot k is object k in every frame it is alive, and a slot may hold
+another object after a removal (its id is the slot's). Positions of a slot that is not alive are
+never read; they are kept finite (the slot's nearest alive position) so every array stays valid.
+
+Files (`load_trajectory`), one line naming the problem for anything wrong:
+- NPZ: `positions` (frames, n, 2), `radii` (n,); optional `alive` (frames, n) bool, `static` (n,)
+  bool, `box` (4,). Positions of objects that are not alive may be NaN.
+- CSV in long form: a header `frame,id,x,y,r` and optional `static`, one row per object per
+  frame it exists in; ids and frame numbers are any integers (sorted, they give slots and frames).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .scene import Scene, check_box, check_mask
+
+MIN_FRAMES = 2  # the untimed warm-up frame and one timed frame
+
+
+class TrajectoryFileError(ValueError):
+    """A trajectory file that cannot be read; the message names the file and the problem."""
+
+
+@dataclass(frozen=True, eq=False)
+class Recording:
+    """Frames of recorded motion: positions (frames, n, 2); alive (frames, n) bool or None (every
+    object in every frame). Static objects are the scene's (`Scene.static`)."""
+
+    positions: np.ndarray
+    alive: np.ndarray | None = None
+    source: str = ""
+
+    @property
+    def frames(self) -> int:
+        return int(self.positions.shape[0])
+
+    def record(self, frames: int) -> "Recording":
+        """The first `frames` frames; a recording has the frames it has, so fewer when asked for more."""
+        if frames >= self.frames:
+            return self
+        return Recording(self.positions[:frames], None if self.alive is None else self.alive[:frames], self.source)
+
+    def digest(self) -> str:
+        h = hashlib.sha1(np.ascontiguousarray(self.positions).tobytes())
+        if self.alive is not None:
+            h.update(np.packbits(self.alive).tobytes())
+        return h.hexdigest()[:12]
+
+
+def fill_absent(positions: np.ndarray, alive: np.ndarray) -> np.ndarray:
+    """Positions with every slot that is not alive given its nearest alive position (earlier
+    first, else later; 0 for a slot never alive), so that every value is finite and a parked slot
+    does not jump."""
+    out = positions.copy()
+    seen = np.zeros(alive.shape[1], dtype=bool)
+    for f in range(len(out)):  # forward: the last alive position
+        here = alive[f]
+        if f:
+            carry = ~here & seen
+            out[f, carry] = out[f - 1, carry]
+        seen |= here
+    first = np.where(alive.any(axis=0), alive.argmax(axis=0), 0)
+    before = ~seen[None, :] | (np.arange(len(out))[:, None] < first[None, :])
+    before &= ~alive
+    out[before] = np.broadcast_to(out[first, np.arange(alive.shape[1])], out.shape)[before]
+    out[:, ~alive.any(axis=0)] = 0.0
+    return out
+
+
+def recorded_scene(positions, radii, alive=None, static=None, box=None, name: str = "recorded",
+                   source: str = "", meta: dict | None = None) -> Scene:
+    """A Scene whose motion is these frames; checks every array, raising ValueError naming the problem."""
+    pos = np.asarray(positions, dtype=np.float64) if np.asarray(positions).dtype.kind in "fiu" else None
+    if pos is None or pos.ndim != 3 or pos.shape[2] != 2:
+        raise ValueError(f"positions must be a (frames, n, 2) array of numbers, got "
+                         f"{np.shape(positions)} {np.asarray(positions).dtype}")
+    frames, n, _ = pos.shape
+    if frames < MIN_FRAMES:
+        raise ValueError(f"the recording has {frames} frame(s); at least {MIN_FRAMES} are needed "
+                         "(a warm-up frame and a timed one)")
+    alive_mask = check_mask(alive, (frames, n), "alive")
+    static_mask = check_mask(static, (n,), "static")
+    present = np.ones((frames, n), dtype=bool) if alive_mask is None else alive_mask
+    finite = np.isfinite(pos).all(axis=2)
+    bad = present & ~finite
+    if bad.any():
+        f, k = (int(v[0]) for v in np.nonzero(bad))
+        raise ValueError(f"object {k} is alive in frame {f} but its position is not finite: {pos[f, k].tolist()}")
+    if alive_mask is not None:
+        pos = fill_absent(np.where(finite[..., None], pos, 0.0), alive_mask)
+    if static_mask is not None and static_mask.any():
+        ids = np.flatnonzero(static_mask)
+        moved = present[:, ids] & (pos[:, ids] != pos[0, ids]).any(axis=2) & present[0, ids]
+        if moved.any():
+            f, k = (int(v[0]) for v in np.nonzero(moved))
+            raise ValueError(f"object {ids[k]} is static but moves in frame {f}")
+    if box is None:
+        box = _bounding_box(pos, np.asarray(radii, dtype=np.float64), present)
+    scene = Scene(pos[0], radii, np.zeros((n, 2)), box=check_box(box), name=name, walls=False, responds=False,
+                  static=static_mask, motion=Recording(pos, alive_mask, source),
+                  meta={"dist": "recorded", **(meta or {})})
+    return scene
+
+
+def _bounding_box(positions: np.ndarray, radii: np.ndarray, present: np.ndarray) -> tuple[float, ...]:
+    """The box around every alive object in every frame, with a unit pad where it is flat."""
+    if radii.shape != positions.shape[1:2] or not present.any():
+        return (0.0, 0.0, 1.0, 1.0)  # the Scene's own checks name a radii problem
+    lo = np.full(2, np.inf)
+    hi = np.full(2, -np.inf)
+    for frame, here in zip(positions, present):
+        if here.any():
+            lo = np.minimum(lo, (frame[here] - radii[here, None]).min(axis=0))
+            hi = np.maximum(hi, (frame[here] + radii[here, None]).max(axis=0))
+    pad = np.where(hi > lo, 0.0, 1.0)
+    return (lo[0] - pad[0], lo[1] - pad[1], hi[0] + pad[0], hi[1] + pad[1])
+
+
+def load_trajectory(path: str | os.PathLike, name: str | None = None) -> Scene:
+    """Read a trajectory file (NPZ or long-form CSV, by its suffix); TrajectoryFileError for anything wrong."""
+    path = Path(path)
+    if not path.is_file():
+        raise TrajectoryFileError(f"{path}: no such file")
+    reader = {".npz": _read_npz, ".csv": _read_csv}.get(path.suffix.lower())
+    if reader is None:
+        raise TrajectoryFileError(f"{path}: a trajectory is an .npz or a .csv file, got {path.suffix or 'no suffix'!r}")
+    try:
+        fields = reader(path)
+        return recorded_scene(**fields, name=name or path.stem, source=str(path), meta={"file": str(path)})
+    except TrajectoryFileError:
+        raise
+    except ValueError as exc:
+        raise TrajectoryFileError(f"{path}: {exc}") from None
+
+
+def _read_npz(path: Path) -> dict:
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+    except (OSError, ValueError) as exc:
+        raise TrajectoryFileError(f"{path}: not a readable .npz file ({exc})") from None
+    missing = [k for k in ("positions", "radii") if k not in arrays]
+    unknown = sorted(set(arrays) - {"positions", "radii", "alive", "static", "box"})
+    if missing or unknown:
+        raise TrajectoryFileError(f"{path}: arrays must be positions, radii and optional alive, static, box"
+                                  + (f"; missing {', '.join(missing)}" if missing else "")
+                                  + (f"; unknown {', '.join(unknown)}" if unknown else ""))
+    return {"positions": arrays["positions"], "radii": arrays["radii"], "alive": arrays.get("alive"),
+            "static": arrays.get("static"), "box": arrays.get("box")}
+
+
+CSV_COLUMNS = ("frame", "id", "x", "y", "r")
+
+
+def _read_csv(path: Path) -> dict:
+    import pandas as pd
+
+    try:
+        table = pd.read_csv(path, skipinitialspace=True, comment="#")
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise TrajectoryFileError(f"{path}: not a readable CSV file ({str(exc).splitlines()[0]})") from None
+    table.columns = [str(c).strip().lower() for c in table.columns]
+    missing = [c for c in CSV_COLUMNS if c not in table.columns]
+    unknown = [c for c in table.columns if c not in CSV_COLUMNS + ("static",)]
+    if missing or unknown:
+        raise TrajectoryFileError(f"{path}: header must be frame,id,x,y,r with optional static; got "
+                                  f"{','.join(table.columns)}" + (f" (missing {','.join(missing)})" if missing else "")
+                                  + (f" (unknown {','.join(unknown)})" if unknown else ""))
+    if table.empty:
+        raise TrajectoryFileError(f"{path}: no rows after the header")
+    for column in table.columns:
+        values = pd.to_numeric(table[column], errors="coerce")
+        bad = values.isna() | ~np.isfinite(values.to_numpy(dtype=float, na_value=np.nan))
+        if bad.any():
+            row = int(np.flatnonzero(bad.to_numpy())[0])
+            raise TrajectoryFileError(f"{path}, line {row + 2}: column {column} is not a finite number: "
+                                      f"{table[column].iloc[row]!r}")
+        table[column] = values
+    for column in ("frame", "id"):
+        if (table[column] != np.floor(table[column])).any():
+            row = int(np.flatnonzero((table[column] != np.floor(table[column])).to_numpy())[0])
+            raise TrajectoryFileError(f"{path}, line {row + 2}: {column} must be an integer, got {table[column].iloc[row]!r}")
+    frame_of = np.unique(table["frame"].to_numpy(np.int64), return_inverse=True)[1]
+    ids, slot_of = np.unique(table["id"].to_numpy(np.int64), return_inverse=True)
+    frames, n = int(frame_of.max()) + 1, len(ids)
+    twice = np.bincount(frame_of * n + slot_of, minlength=frames * n) > 1
+    if twice.any():
+        f, k = divmod(int(np.flatnonzero(twice)[0]), n)
+        raise TrajectoryFileError(f"{path}: object {ids[k]} appears twice in frame {f}")
+    r = table["r"].to_numpy(float)
+    radii = np.zeros(n)
+    radii[slot_of] = r
+    changed = r != radii[slot_of]
+    if changed.any():
+        row = int(np.flatnonzero(changed)[0])
+        raise TrajectoryFileError(f"{path}, line {row + 2}: object {ids[slot_of[row]]} changes radius "
+                                  "(a radius is the object's, the same in every frame)")
+    positions = np.full((frames, n, 2), np.nan)
+    positions[frame_of, slot_of] = table[["x", "y"]].to_numpy(float)
+    alive = np.zeros((frames, n), dtype=bool)
+    alive[frame_of, slot_of] = True
+    static = None
+    if "static" in table.columns:
+        flags = table["static"].to_numpy()
+        if not np.isin(flags, (0, 1)).all():
+            raise TrajectoryFileError(f"{path}: column static must be 0 or 1")
+        static = np.zeros(n, dtype=bool)
+        static[slot_of] = flags.astype(bool)
+    return {"positions": positions, "radii": radii, "alive": None if alive.all() else alive, "static": static,
+            "box": None}
+
+
+def save_trajectory(scene: Scene, path: str | os.PathLike, frames: int | None = None) -> Path:
+    """Write a recorded scene's frames (all, or the first `frames`) as an NPZ that load_trajectory reads back."""
+    if not isinstance(scene.motion, (Recording,)) and not hasattr(scene.motion, "record"):
+        raise ValueError("only a scene with recorded motion can be saved as a trajectory")
+    rec = scene.motion.record(frames or scene.motion.frames)
+    arrays = {"positions": rec.positions, "radii": scene.radii, "box": np.asarray(scene.box)}
+    if rec.alive is not None:
+        arrays["alive"] = rec.alive
+    if scene.static is not None:
+        arrays["static"] = scene.static
+    path = Path(path)
+    np.savez_compressed(path, **arrays)
+    return path

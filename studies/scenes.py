@@ -1,0 +1,189 @@
+"""`python -m studies.scenes`: every backend on every scene family, essay's motion and recorded.
+
+The essay's motion (free flight at one speed) beside the families a real project has, recorded
+with pymunk (scenes/families.py: pile, rain, tumbler, smash, level), at each n of `--sizes`.
+Backends are ranked on update + pairs (the broad phase itself); the report says per family which
+of our structured backends falls over 3x behind our fastest, how our fastest stands against the
+fastest engine, and where the ranking differs from the essay's motion. Writes results.csv,
+meta.json, scenes.csv and SCENES.md (docs/ for a full run).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+import engines
+from scenes import FAMILIES
+from scenes.generate import at_essay_density
+
+from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli, warn_unavailable
+from .lib.harness import Job
+from .lib.options import add_backends_option, add_output_options, add_quick_option, add_trial_options, parse_checked
+from .lib.output import Output, docs_folder, read_meta
+from .lib.pool import Pool
+from .lib.results import RowWriter, missed_total, ok_lines, read_rows, summarise
+from .lib.runner import Runner
+
+ESSAY_MOTION = "uniform"  # the essay's motion, at the essay's density
+# The structured backends of ours that must stay within WITHIN of our fastest on every family.
+STRUCTURED = ("own.grid", "own.grid_incremental", "own.sap", "own.sap_incremental", "own.quadtree", "own.bvh",
+              "own.verlet")
+WITHIN = 3.0
+
+
+def parser() -> Parser:
+    p = Parser(prog="python -m studies.scenes", description=__doc__.split("\n\n")[0])
+    p.add_argument("--families", default=",".join((ESSAY_MOTION,) + FAMILIES), metavar="NAME[,NAME]",
+                   help=f"scene families (default: {ESSAY_MOTION}, the essay's motion, and {', '.join(FAMILIES)})")
+    p.add_argument("--sizes", default="4096,65536", metavar="N[,N]", help="object counts (default 4096,65536)")
+    add_backends_option(p)
+    add_trial_options(p, frames=20, repeat=2, budget=0.25, timeout=300.0)
+    add_output_options(p, "scenes", report_dir="docs/ for a full run, --out for --quick")
+    add_quick_option(p, "n = 1024, 3 frames, 1 repeat, our backends and Chipmunk's", sizes="1024", frames=3,
+                     repeat=1, backends="own.*,chipmunk.*_index")
+    return p
+
+
+def parse(argv: list[str] | None):
+    args = parse_checked(parser(), argv)
+    args.family_list = [f.strip() for f in args.families.split(",") if f.strip()]
+    unknown = [f for f in args.family_list if f not in (ESSAY_MOTION,) + FAMILIES]
+    if unknown or not args.family_list:
+        raise CliError(f"--families: unknown {', '.join(unknown) or 'none given'}; known: "
+                       f"{', '.join((ESSAY_MOTION,) + FAMILIES)}")
+    try:
+        args.size_list = [int(v) for v in args.sizes.split(",")]
+    except ValueError:
+        raise CliError(f"--sizes must be a comma-separated list of integers, got {args.sizes!r}") from None
+    if min(args.size_list) < 2:
+        raise CliError("--sizes: every n must be at least 2")
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse(argv)
+    report_dir = Path(args.report_dir) if args.report_dir else None
+    if args.report_only:
+        return report(Path(args.out), report_dir or (Path(args.out) if args.quick else docs_folder()))
+    chosen = matched_backends(args.backends)
+    with Output(args.out, "scenes", command_line("scenes", argv), args.resume) as out:
+        unavailable = warn_unavailable(chosen)
+        runnable = [b for b in chosen if b not in unavailable]
+        writer = RowWriter(out.path, args.resume)
+        runner = Runner(writer, out, pool=Pool.from_args(args))
+        out.meta(families=args.family_list, sizes=args.size_list, frames=args.frames, repeats=args.repeat,
+                 unavailable=unavailable)
+        jobs = []
+        for family in args.family_list:
+            for n in args.size_list:
+                scene = at_essay_density(family, n)
+                jobs += [Job(backend, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout,
+                             memory_mb=args.memory, scene=scene, frames=args.frames, tag={"label": family})
+                         for backend in runnable]
+        with runner:
+            runner.run_all(jobs, desc="scene families x backends")
+        writer.finish()
+    return report(out.path, report_dir or (out.path if args.quick else docs_folder()))
+
+
+def family_tables(rows: pd.DataFrame) -> dict[tuple[str, int], pd.DataFrame]:
+    """One table per (family, n): every backend that ran, ranked on update + pairs."""
+    summary = summarise(rows, ["label", "n", "backend"])
+    tables = {}
+    for (family, n), group in summary.groupby(level=["label", "n"], sort=False):
+        table = group.droplevel(["label", "n"]).copy()
+        table["broad_ms"] = table["update_ms"] + table["pairs_ms"]
+        table["missed_total"] = missed_total(table) if len(ok_lines(table)) else 0
+        tables[family, int(n)] = table.sort_values(["status", "broad_ms"], key=lambda c: c if c.name != "status"
+                                                    else (c != "ok"))
+    return tables
+
+
+def verdict(table: pd.DataFrame) -> dict:
+    """Our fastest (one thread) against the fastest engine, and our structured backends over WITHIN."""
+    ok = ok_lines(table)
+    ours = [b for b in ok.index if engines.of_kind(b, "own") and not engines.uses_every_core(b)]
+    rivals = [b for b in ok.index if engines.of_kind(b, "engine")]
+    best = min(ours, key=lambda b: ok.loc[b, "broad_ms"]) if ours else None
+    engine = min(rivals, key=lambda b: ok.loc[b, "broad_ms"]) if rivals else None
+    slow = {b: ok.loc[b, "broad_ms"] / ok.loc[best, "broad_ms"] for b in STRUCTURED
+            if best and b in ok.index and ok.loc[b, "broad_ms"] > WITHIN * ok.loc[best, "broad_ms"]}
+    failed = [b for b in STRUCTURED if b in table.index and b not in ok.index]
+    missed = [b for b in ours if ok.loc[b, "missed_total"] > 0]
+    return {"best": best, "engine": engine, "ratio": (ok.loc[engine, "broad_ms"] / ok.loc[best, "broad_ms"])
+            if best and engine else None, "slow": slow, "failed": failed, "missed": missed}
+
+
+def report(folder: Path, report_dir: Path) -> int:
+    rows, complete = read_rows(folder)
+    meta = read_meta(folder)
+    tables = family_tables(rows)
+    lines = ["# Scene families: the essay's motion and recorded scenes", "",
+             "Generated by `python -m studies.scenes` "
+             f"({', '.join(str(n) for n in meta.get('sizes', []))} objects; {meta.get('frames', '?')} timed frames x "
+             f"{meta.get('repeats', '?')} repeats; {meta.get('machine', {}).get('cores', '?')} cores); "
+             f"command: `{meta.get('command', '?')}`. Families recorded with pymunk: see `scenes/families.py`. "
+             "Times are medians per frame; **broad** is update + pairs, the broad phase itself; **missed** "
+             "sums the truly overlapping pairs (and, for 'boxes' backends, overlapping boxes) left out over "
+             "every frame.", ""]
+    if not complete:
+        lines += ["**Interrupted run**: these are the rows so far.", ""]
+    essay_rank = {n: list(ok_lines(t).index) for (f, n), t in tables.items() if f == ESSAY_MOTION}
+    summary_rows = []
+    for (family, n), table in tables.items():
+        v = verdict(table)
+        summary_rows.append({"family": family, "n": n, "ours": v["best"],
+                             "ours_ms": table.loc[v["best"], "broad_ms"] if v["best"] else None,
+                             "engine": v["engine"],
+                             "engine_ms": table.loc[v["engine"], "broad_ms"] if v["engine"] else None,
+                             "engine_over_ours": v["ratio"], "over_3x": ", ".join(f"{b} {r:.1f}x" for b, r in
+                                                                                 v["slow"].items()),
+                             "failed": ", ".join(v["failed"]), "ours_missing_pairs": ", ".join(v["missed"])})
+    summary = pd.DataFrame(summary_rows)
+    lines += ["## Summary (update + pairs)", "",
+              "| family | n | our fastest | ms | fastest engine | ms | engine / ours | structured own over 3x | "
+              "own that missed |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in summary.itertuples():
+        ratio = f"{r.engine_over_ours:.1f}x" if r.engine_over_ours == r.engine_over_ours and r.engine_over_ours \
+            else "-"
+        lines.append(f"| {r.family} | {r.n} | {r.ours} | {_f(r.ours_ms)} | {r.engine or '-'} | {_f(r.engine_ms)} | "
+                     f"{ratio} | {r.over_3x or 'none'}{' (failed: ' + r.failed + ')' if r.failed else ''} | "
+                     f"{r.ours_missing_pairs or 'none'} |")
+    for (family, n), table in tables.items():
+        lines += ["", f"## {family}, n = {n}", ""]
+        essay = essay_rank.get(n)
+        if family != ESSAY_MOTION and essay:
+            ranked = list(ok_lines(table).index)
+            moved = [f"{b} {essay.index(b) + 1} -> {ranked.index(b) + 1}" for b in ranked[:8]
+                     if b in essay and abs(essay.index(b) - ranked.index(b)) >= 3]
+            lines += [f"Rank changes against the essay's motion (top 8, moves of 3 places or more): "
+                      f"{', '.join(moved) or 'none'}.", ""]
+        lines += ["| rank | backend | broad ms | update ms | pairs ms | total ms | cand/true | missed | status |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        for k, (name, r) in enumerate(table.iterrows(), 1):
+            ok = r["status"] == "ok"
+            lines.append(f"| {k if ok else '-'} | {name} | {_f(r['broad_ms']) if ok else '-'} | "
+                         f"{_f(r['update_ms']) if ok else '-'} | {_f(r['pairs_ms']) if ok else '-'} | "
+                         f"{_f(r['total_ms']) if ok else '-'} | {r['cand_per_true']:.2f} | "
+                         f"{int(r['missed_total']) if ok else '-'} | {r['status'][:90]} |")
+    unavailable = meta.get("unavailable", {})
+    if unavailable:
+        lines += ["", f"Not run (unavailable on the measuring machine): {', '.join(unavailable)}."]
+    report_dir.mkdir(parents=True, exist_ok=True)
+    summary.to_csv(folder / "scenes.csv", index=False)
+    (report_dir / "SCENES.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines[lines.index("## Summary (update + pairs)"):lines.index("## Summary (update + pairs)")
+                          + 4 + len(summary)]))
+    print(f"\nwrote {folder / 'scenes.csv'}, {report_dir / 'SCENES.md'}")
+    return 0
+
+
+def _f(value) -> str:
+    return "-" if value is None or value != value else f"{value:.3g}"
+
+
+if __name__ == "__main__":
+    sys.exit(run_cli("scenes", main, None))
