@@ -137,7 +137,7 @@ class BroadPhase(ABC):
         self.static: np.ndarray | None = None
         self.alive: np.ndarray | None = None
         self.spawned = self.removed = NO_IDS  # this frame's, for "native" backends
-        self._ids: np.ndarray | None = None  # "rebuild": the ids of the objects handed to the backend
+        self._alive_ids: np.ndarray | None = None  # "rebuild": the ids of the objects handed to the backend
 
     def reset(self, positions: npt.ArrayLike, radii: npt.ArrayLike, static: npt.ArrayLike | None = None,
               alive: npt.ArrayLike | None = None) -> None:
@@ -151,7 +151,7 @@ class BroadPhase(ABC):
         self.objects, self.spawned, self.removed, self._all_radii = n, NO_IDS, NO_IDS, radii
         self._built = False
         if self.lifecycle == "native" or (self.static is None and self.alive is None):
-            self._ids = None
+            self._alive_ids = None
             self.radii, self.n = radii, n
             self._reset(pos, self.radii)
         else:
@@ -173,21 +173,21 @@ class BroadPhase(ABC):
             if changed:
                 self.spawned, self.removed = np.flatnonzero(alive & ~before), np.flatnonzero(before & ~alive)
             self.alive = alive
-        if self._ids is None and (self.lifecycle == "native" or not changed):
+        if self._alive_ids is None and (self.lifecycle == "native" or not changed):
             self._update(pos)
         elif changed:
             self._rebuild(pos)
         else:
-            self._update(pos[self._ids])
+            self._update(pos[self._alive_ids])
         if changed:
             self.spawned = self.removed = NO_IDS
 
     def _rebuild(self, positions: np.ndarray) -> None:
         """"rebuild" lifecycle: build the backend anew on the objects alive now."""
         alive = self.alive if self.alive is not None else np.ones(self.objects, dtype=bool)
-        self._ids = np.flatnonzero(alive)
-        self.radii, self.n = self._all_radii[self._ids], len(self._ids)
-        self._reset(np.ascontiguousarray(positions[self._ids]), self.radii)
+        self._alive_ids = np.flatnonzero(alive)
+        self.radii, self.n = self._all_radii[self._alive_ids], len(self._alive_ids)
+        self._reset(np.ascontiguousarray(positions[self._alive_ids]), self.radii)
 
     def _check_limits(self, positions: np.ndarray, radii: np.ndarray | None = None) -> None:
         if self.limits is NO_LIMITS:  # our own backends: no cost per frame
@@ -202,9 +202,9 @@ class BroadPhase(ABC):
         if not self._built:
             raise RuntimeError(f"{self.name}: call reset(positions, radii) before pairs()")
         found = self._pairs()
-        if self._ids is None:
+        if self._alive_ids is None:
             return found
-        found = self._ids[found]  # ids ascend, so i < j still holds
+        found = self._alive_ids[found]  # ids ascend, so i < j still holds
         if self.static is not None:
             found = found[~(self.static[found[:, 0]] & self.static[found[:, 1]])]
         return found

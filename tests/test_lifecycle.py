@@ -1,0 +1,108 @@
+"""Statics and spawning through the interface: every backend, against the exact reference.
+
+Objects keep their ids whatever exists; a backend never pairs an object that is not alive, never
+pairs two statics, and (as everywhere) never misses an overlap it promises.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import engines
+from engines.pairs import is_canonical, keys, missing
+from own.reference import box_pairs, narrow_phase
+from scenes.motion import simulate
+from scenes.recorded import recorded_scene
+
+from test_engines import RELIABLE, make
+from test_own_exact import EXACT, IDS
+
+OWN_AND_ESSAY = [n for n in engines.names() if n.split(".")[0] in ("own", "essay")]
+
+
+def lifecycle_scene(n: int = 150, frames: int = 6, seed: int = 3, static_share: float = 0.3, spawn: bool = True):
+    """Objects on a random walk in a small box (many overlaps), a share of them static, a fifth
+    of them appearing or going between frames."""
+    rng = np.random.default_rng(seed)
+    positions = rng.uniform(0, 200, (1, n, 2)) + np.cumsum(rng.normal(0, 3, (frames, n, 2)), axis=0)
+    static = rng.random(n) < static_share
+    positions[:, static] = positions[0, static]
+    alive = rng.random((frames, n)) < 0.8 if spawn else None
+    return recorded_scene(positions, rng.uniform(2, 12, n), alive=alive, static=static)
+
+
+def run_through(backend, traj):
+    """Every frame's pairs, checked for validity, lifecycle and misses."""
+    scene = traj.scene
+    n = scene.n
+    backend.reset(traj.positions[0], scene.radii, static=scene.static, alive=traj.alive_at(0))
+    for f in range(traj.frames):
+        backend.update(traj.positions[f], traj.alive_at(f))
+        got = backend.pairs()
+        assert is_canonical(got, n) is None, is_canonical(got, n)
+        if traj.alive is not None:
+            assert traj.alive[f][got].all(), f"{backend.name} paired an object that is not alive in frame {f}"
+        assert not (scene.static[got[:, 0]] & scene.static[got[:, 1]]).any(), f"{backend.name} paired two statics"
+        want = traj.box_pairs[f] if backend.reports == "boxes" else traj.contacts[f]
+        lost = missing(want, got, n)
+        assert len(lost) == 0, f"{backend.name} missed {len(lost)} pair(s) in frame {f}, e.g. {lost[:3].tolist()}"
+        yield f, got
+
+
+@pytest.mark.parametrize("name", OWN_AND_ESSAY + RELIABLE)
+@pytest.mark.parametrize("spawn", [False, True], ids=["statics", "statics and spawning"])
+def test_every_backend_takes_statics_and_spawning(name, spawn):
+    traj = simulate(lifecycle_scene(spawn=spawn), 6)
+    backend = make(name)
+    try:
+        for f, got in run_through(backend, traj):
+            if backend.exact:
+                assert np.array_equal(np.sort(keys(got, traj.scene.n)), keys(traj.box_pairs[f], traj.scene.n))
+    finally:
+        backend.close()
+
+
+@pytest.mark.parametrize(("name", "params"), EXACT, ids=IDS)
+@settings(max_examples=10)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(0, 90), share=st.sampled_from([0.0, 0.5, 0.95, 1.0]))
+def test_exact_backends_are_exact_with_statics_and_spawning(name, params, seed, n, share):
+    traj = simulate(lifecycle_scene(n=n, frames=4, seed=seed, static_share=share), 4)
+    backend = engines.create(name, **params)
+    for f, got in run_through(backend, traj):
+        assert np.array_equal(np.sort(keys(got, n)), keys(traj.box_pairs[f], n))
+
+
+def test_the_reference_skips_statics_and_objects_not_alive():
+    positions = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]])
+    radii = np.ones(3)
+    assert box_pairs(positions, radii).tolist() == [[0, 1], [0, 2], [1, 2]]
+    assert box_pairs(positions, radii, static=np.array([True, True, False])).tolist() == [[0, 2], [1, 2]]
+    assert box_pairs(positions, radii, alive=np.array([True, False, True])).tolist() == [[0, 2]]
+
+
+def test_objects_keep_their_ids_when_others_appear_and_go():
+    positions = np.array([[0.0, 0.0], [100.0, 0.0], [101.0, 0.0], [1.0, 0.0]])
+    backend = engines.create("own.grid")
+    backend.reset(positions, np.ones(4), alive=np.array([True, False, False, True]))
+    assert backend.pairs().tolist() == [[0, 3]]
+    backend.update(positions, alive=np.array([False, True, True, True]))
+    assert backend.pairs().tolist() == [[1, 2]]
+
+
+@pytest.mark.parametrize(("kwargs", "words"), [
+    ({"static": np.ones(3)}, "static must have shape (4,)"),
+    ({"alive": np.full(4, 2)}, "alive must be booleans"),
+])
+def test_bad_masks_are_one_clear_error(kwargs, words):
+    backend = engines.create("own.sap")
+    with pytest.raises(ValueError, match=words.replace("(", r"\(").replace(")", r"\)")):
+        backend.reset(np.zeros((4, 2)), np.ones(4), **kwargs)
+
+
+def test_narrow_phase_of_the_reference_keeps_the_lifecycle():
+    traj = simulate(lifecycle_scene(), 4)
+    for f in range(traj.frames):
+        assert np.array_equal(traj.contacts[f], narrow_phase(traj.positions[f], traj.scene.radii, traj.box_pairs[f]))
