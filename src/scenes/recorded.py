@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .scene import Scene, check_box, check_mask
+from .scene import Scene, check_box, check_mask, check_radii
 
 MIN_FRAMES = 2  # the untimed warm-up frame and one timed frame
 
@@ -85,6 +85,7 @@ def recorded_scene(positions, radii, alive=None, static=None, box=None, name: st
         raise ValueError(f"positions must be a (frames, n, 2) array of numbers, got "
                          f"{np.shape(positions)} {np.asarray(positions).dtype}")
     frames, n, _ = pos.shape
+    radii = check_radii(radii, n)
     if frames < MIN_FRAMES:
         raise ValueError(f"the recording has {frames} frame(s); at least {MIN_FRAMES} are needed "
                          "(a warm-up frame and a timed one)")
@@ -105,7 +106,7 @@ def recorded_scene(positions, radii, alive=None, static=None, box=None, name: st
             f, k = (int(v[0]) for v in np.nonzero(moved))
             raise ValueError(f"object {ids[k]} is static but moves in frame {f}")
     if box is None:
-        box = _bounding_box(pos, np.asarray(radii, dtype=np.float64), present)
+        box = _bounding_box(pos, radii, present)
     scene = Scene(pos[0], radii, np.zeros((n, 2)), box=check_box(box), name=name, walls=False, responds=False,
                   static=static_mask, motion=Recording(pos, alive_mask, source),
                   meta={"dist": "recorded", **(meta or {})})
@@ -114,8 +115,8 @@ def recorded_scene(positions, radii, alive=None, static=None, box=None, name: st
 
 def _bounding_box(positions: np.ndarray, radii: np.ndarray, present: np.ndarray) -> tuple[float, ...]:
     """The box around every alive object in every frame, with a unit pad where it is flat."""
-    if radii.shape != positions.shape[1:2] or not present.any():
-        return (0.0, 0.0, 1.0, 1.0)  # the Scene's own checks name a radii problem
+    if not present.any():
+        return (0.0, 0.0, 1.0, 1.0)
     lo = np.full(2, np.inf)
     hi = np.full(2, -np.inf)
     for frame, here in zip(positions, present):
