@@ -74,6 +74,11 @@ def main(argv: list[str] | None = None) -> int:
               f"box {scene.box} ({coverage(scene.radii, scene.box):.0%} of it covered by the objects' boxes), "
               f"{args.frames} timed frames x {args.repeat} repeats (trajectory and exact pairs computed once in "
               f"{time.perf_counter() - start:.1f} s)")
+        if scene.motion is not None:
+            alive = traj.alive.sum(axis=1) if traj.alive is not None else None
+            print(f"recorded motion ({scene.motion.record(1).source or scene.meta.get('dist')}): {traj.frames} frames, "
+                  f"{scene.static_share:.0%} of the objects static"
+                  + (f", {alive.min()} to {alive.max()} of {scene.n} alive per frame" if alive is not None else ""))
         out.meta(scene={**scene_columns(traj.scene), "box": scene.box, "frames": args.frames, "repeats": args.repeat},
                  unavailable=unavailable)
         jobs = [Job(backend, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout,

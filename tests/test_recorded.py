@@ -16,7 +16,6 @@ from scenes.families import TRAITS, FamilyMotion, cache_dir
 from scenes.motion import simulate
 from scenes.recorded import TrajectoryFileError, load_trajectory, save_trajectory
 from studies import compare, recommend, scenes as scenes_study
-from studies.__main__ import main as studies_main  # noqa: F401  (the package's entry imports cleanly)
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 

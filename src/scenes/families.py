@@ -90,9 +90,9 @@ class FamilyMotion:
                                      f"pymunk {self.family}").record(frames)
             except (OSError, ValueError, KeyError):
                 path.unlink(missing_ok=True)  # a torn file: record again
-        return self._simulate(max(frames, FIRST_FRAMES))[1].record(frames)
+        return self._simulate(max(frames, FIRST_FRAMES)).record(frames)
 
-    def _simulate(self, frames: int) -> tuple[dict, Recording]:
+    def _simulate(self, frames: int) -> Recording:
         fields = RECIPES[self.family](self.n, np.random.default_rng(self.seed), self.radii, frames)
         folder = cache_dir()
         folder.mkdir(parents=True, exist_ok=True)
@@ -104,7 +104,7 @@ class FamilyMotion:
             os.replace(tmp, path)
         finally:
             Path(tmp).unlink(missing_ok=True)
-        return fields, Recording(fields["positions"], fields.get("alive"), f"pymunk {self.family}")
+        return Recording(fields["positions"], fields.get("alive"), f"pymunk {self.family}")
 
 
 def _frames_of(path: Path) -> int:

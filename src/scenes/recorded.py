@@ -223,7 +223,7 @@ def _read_csv(path: Path) -> dict:
 
 def save_trajectory(scene: Scene, path: str | os.PathLike, frames: int | None = None) -> Path:
     """Write a recorded scene's frames (all, or the first `frames`) as an NPZ that load_trajectory reads back."""
-    if not isinstance(scene.motion, (Recording,)) and not hasattr(scene.motion, "record"):
+    if scene.motion is None:
         raise ValueError("only a scene with recorded motion can be saved as a trajectory")
     rec = scene.motion.record(frames or scene.motion.frames)
     arrays = {"positions": rec.positions, "radii": scene.radii, "box": np.asarray(scene.box)}
