@@ -22,15 +22,14 @@ from matplotlib.patches import Rectangle
 import engines
 from scenes import Scene
 from scenes.generate import at_essay_density
-from scenes.io import load_scene, save_scene
-from scenes.recorded import load_trajectory
+from scenes.io import save_scene
 from scenes.stress import STRESS_SCENES
 
 from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli, warn_unavailable
 from .lib.figures import new_figure, save
 from .lib.harness import Job
 from .lib.options import (add_backends_option, add_output_options, add_quick_option, add_scene_file_option,
-                          add_trial_options, parse_checked)
+                          add_trial_options, file_scene, parse_checked)
 from .lib.output import Output, docs_folder, read_meta
 from .lib.pool import Pool
 from .lib.results import RowWriter, missed_total, read_rows, summarise
@@ -247,14 +246,8 @@ def chosen_scenes(args) -> list[Scene]:
     if not names and not args.scene and not args.trajectory:
         raise CliError(f"--scenes {args.scenes!r} matches no stress scene; known: {', '.join(STRESS_SCENES)}")
     scenes = [STRESS_SCENES[n]() for n in names]
-    try:
-        if args.scene:
-            scenes.append(load_scene(args.scene))
-        if args.trajectory:
-            scenes.append(load_trajectory(args.trajectory))
-    except ValueError as exc:
-        raise CliError(str(exc)) from None
-    return scenes
+    given = file_scene(args)
+    return scenes + ([given] if given is not None else [])
 
 
 def main(argv: list[str] | None = None) -> int:

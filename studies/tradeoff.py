@@ -29,8 +29,8 @@ from scenes import Scene, generate
 from .lib.cli import Parser, command_line, matched_backends, run_cli, warn_unavailable
 from .lib.figures import family_colour, new_figure, pareto_front
 from .lib.harness import Job
-from .lib.options import (add_backends_option, add_output_options, add_quick_option, add_trial_options,
-                          parse_checked)
+from .lib.options import (add_backends_option, add_output_options, add_quick_option, add_scene_file_option,
+                          add_trial_options, file_scene, parse_checked)
 from .lib.output import Output, docs_folder, read_meta, write_json
 from .lib.pool import Pool
 from .lib.results import RowWriter, read_rows, summarise
@@ -178,6 +178,7 @@ def report(lines: pd.DataFrame, meta: dict, folder: Path, figure_name: str) -> P
 def parser() -> Parser:
     p = Parser(prog="python -m studies.tradeoff", description=__doc__.split("\n\n")[0])
     add_backends_option(p)
+    add_scene_file_option(p.add_argument_group("your scene, measured beside the study's own"))
     add_trial_options(p, frames=20, repeat=1, budget=0.05, timeout=120.0)
     add_quick_option(p, "n = 256, 5 frames", frames=5)
     add_output_options(p, "tradeoff", report_dir="docs/ for a full run, else the results folder")
@@ -189,13 +190,15 @@ def main(argv: list[str] | None = None) -> int:
     if args.report_only:
         return finish(Path(args.out), read_meta(Path(args.out)), args)
     chosen = matched_backends(args.backends)
+    given = file_scene(args)  # checked before the output folder is touched
+    chosen_scenes = {**scenes(args.quick), **({"yours": given} if given is not None else {})}
     with Output(args.out, "tradeoff", command_line("tradeoff", argv), args.resume) as out:
         missing = warn_unavailable(chosen)
         backends = [b for b in chosen if b not in missing]
         writer = RowWriter(out.path, args.resume)
         swept = {}
         with Runner(writer, out, pool=Pool.from_args(args)) as runner:
-            for name, scene in scenes(args.quick).items():
+            for name, scene in chosen_scenes.items():
                 swept[name] = int(len(runner.trajectory(scene, args.frames + 1).swept_contacts))
                 runner.run_all([Job(backend, params, repeats=args.repeat, budget_s=args.budget,
                                     timeout_s=args.timeout, memory_mb=args.memory, count_tunneling=True, scene=scene,
@@ -203,7 +206,8 @@ def main(argv: list[str] | None = None) -> int:
                                 for backend in backends for label, params in settings(backend, scene)],
                                desc=f"tradeoff {name}")
         writer.finish()
-        meta = out.meta(unavailable=missing, swept_contacts=swept, full=args.backends == "*" and not args.quick)
+        meta = out.meta(unavailable=missing, swept_contacts=swept,
+                        full=args.backends == "*" and not args.quick and given is None)
     return finish(out.path, meta, args)
 
 

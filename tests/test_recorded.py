@@ -177,3 +177,22 @@ def test_the_scenes_study_reports_every_family(tmp_path, capsys):
     table = pd.read_csv(out / "scenes.csv")
     assert set(table.family) == {"uniform", "pile", "rain", "level"} and (table.ours_missing_pairs.isna()).all()
     assert json.loads((out / "meta.json").read_text())["families"] == ["uniform", "pile", "rain", "level"]
+
+
+def test_stress_measures_a_trajectory_and_tradeoff_refuses_a_bad_one_before_touching_out(tmp_path):
+    from studies import stress, tradeoff
+    from studies.lib.cli import CliError
+
+    npz, _, _ = spawning_file(tmp_path)
+    out = tmp_path / "stress"
+    assert stress.main(["--scenes", "none", "--trajectory", str(npz), "--backends", "own.grid,own.sap", "--frames",
+                        "2", "--repeat", "1", "--out", str(out), "--report-dir", str(out)]) == 0
+    rows = pd.read_csv(out / "results.csv")
+    mine = rows[rows.scene == "mine"]
+    assert set(mine.backend) == {"own.grid", "own.sap"} and (mine.missed == 0).all()
+    bad = tmp_path / "bad.csv"
+    bad.write_text("frame,id,x\n0,1,2\n")
+    for study in (tradeoff, stress):
+        with pytest.raises(CliError, match="header must be frame,id,x,y,r"):
+            study.main(["--trajectory", str(bad), "--out", str(tmp_path / "untouched")])
+        assert not (tmp_path / "untouched").exists()

@@ -250,7 +250,8 @@ def _rain(n, rng, radii, frames):
     cols = max(1, int((x1 - x0) / spacing))
     ground = _lattice(statics, x0 + radii[0], y0 + radii[0], cols, spacing, rng, 0.0)
     _walls(space, [(x0, y1), (x0, y0), (x1, y0), (x1, y1)])
-    bodies: list = [_ball(space, x, y, rad, static=True) for (x, y), rad in zip(ground, r[:statics])]
+    for (x, y), rad in zip(ground, r[:statics]):
+        _ball(space, x, y, rad, static=True)
     positions = np.zeros((frames, n, 2))
     positions[:, :statics] = ground
     alive = np.zeros((frames, n), dtype=bool)
@@ -322,7 +323,7 @@ def _smash(n, rng, radii, frames):
 
 def _level(n, rng, radii, frames):
     lay = _layout("level", n, rng, radii)
-    r, static, (x0, y0, x1, y1) = lay["radii"], lay["static"], lay["box"]
+    r, static = lay["radii"], lay["static"]
     space = _space(GRAVITY)
     statics = int(static.sum())
     spacing = 4.0 * radii[1]

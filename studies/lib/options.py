@@ -63,13 +63,24 @@ def add_scene_file_option(parser) -> None:
                                                              "frame,id,x,y,r and optional static (see the README)")
 
 
-def scene_from_args(args: argparse.Namespace) -> Scene:
-    """The scene the options describe; bad values become CliError."""
+def file_scene(args: argparse.Namespace) -> Scene | None:
+    """The user's own scene (--scene) or recorded frames (--trajectory), or None; a bad file is a CliError."""
     try:
         if getattr(args, "trajectory", None):
             return load_trajectory(args.trajectory)
-        if args.scene:
+        if getattr(args, "scene", None):
             return load_scene(args.scene)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    return None
+
+
+def scene_from_args(args: argparse.Namespace) -> Scene:
+    """The scene the options describe; bad values become CliError."""
+    given = file_scene(args)
+    if given is not None:
+        return given
+    try:
         radii = None
         if args.radii:
             try:
