@@ -64,33 +64,59 @@ def incremental_rebuild(positions, radii, layout, limit, state, head, cand):
     n = positions.shape[0]
     space = key_space(layout)
     w = space[6]
+    # A counting sort by key, stable in object order (mergesort's order), in `head` before it holds
+    # the lists: O(n + cells) where argsort took 0.4 of a 0.65 ms rebuild at n = 4096.
+    large = space[7]
+    head[:large + 2] = 0
     for i in range(n):
         okey[i] = cell_key(positions[i, 0], positions[i, 1], radii[i], limit, space)
-    perm[:] = np.argsort(okey, kind="mergesort")
+        head[okey[i] + 1] += 1
+    for c in range(1, large + 2):
+        head[c] += head[c - 1]
+    for i in range(n):
+        c = okey[i]
+        perm[head[c]] = i
+        head[c] += 1
     gather_centres(positions, perm, xy)
     for a in range(n):
         rank[perm[a]] = a
         sr[a] = radii[perm[a]]
     rkey[:] = okey[perm]
-    head[:] = -1
-    for a in range(n - 1, -1, -1):  # backwards: each list ascends
-        _link(head, nxt, prv, a, rkey[a] + w)
+    # Ranks are in cell order now, and head[c] is where cell c's ranks end (head[c - 1] where
+    # they start: every key is at least 1), so each object's candidates are two ranges of ranks:
+    # the later objects of its own cell and the E cell (adjacent keys), then the NW, N and NE
+    # cells (adjacent keys too); each pair once, in the order the lists would give. They are
+    # counted first, from the bounds alone, so that the stores need no room check: with one
+    # per store the listing took 0.38 ms, without 0.03 (tumbler, n = 4096).
     m = 0
-    large = space[7]
     for a in range(n):
         c = rkey[a]
         if c == large:
             break  # large objects come last
-        # The later objects of the own cell, then the E, NW, N and NE cells: each pair once.
-        b = nxt[a]
-        while b >= 0:
-            m = _add(cand, m, a, b)
-            b = nxt[b]
-        for d in (1, w - 1, w, w + 1):
-            b = head[c + d + w]
-            while b >= 0:
-                m = _add(cand, m, a, b)
-                b = nxt[b]
+        m += head[c + 1] - (a + 1) + head[c + w + 1] - head[c + w - 2]
+    if m <= cand.shape[0]:
+        k = 0
+        for a in range(n):
+            c = rkey[a]
+            if c == large:
+                break
+            for b in range(a + 1, head[c + 1]):
+                cand[k, 0], cand[k, 1] = a, b
+                k += 1
+            for b in range(head[c + w - 2], head[c + w + 1]):
+                cand[k, 0], cand[k, 1] = a, b
+                k += 1
+    # Each cell's list is its run of ranks, ascending, linked in one pass (the runs are
+    # contiguous: no front insertion needed).
+    head[:] = -1
+    for a in range(n):
+        c = rkey[a]
+        first = a == 0 or rkey[a - 1] != c
+        last = a == n - 1 or rkey[a + 1] != c
+        if first:
+            head[c + w] = a
+        prv[a] = -1 if first else a - 1
+        nxt[a] = -1 if last else a + 1
     return m
 
 
