@@ -232,7 +232,7 @@ def write_tuning_md(table: pd.DataFrame, curves: pd.DataFrame, path: Path, args)
         "median time over the best setting's. \"noise\" means their spreads over repeats overlap.",
         "",
         "The rules (in `src/own/`):",
-        "- `own.grid`: cell = one diameter of the largest radius, capped at 4 median radii, then",
+        "- `own.grid`: cell = one diameter of the largest radius of at most 4 median radii, then",
         f"  enlarged until there are at most {MAX_CELLS_PER_OBJECT} cells per object (`default_cell`, `MAX_CELLS_PER_OBJECT`).",
         "- `own.quadtree`: capacity 32, maximum depth 16.",
         "- `own.sap`: the axis along which the centres vary most; the sparse sweep while last frame found at",

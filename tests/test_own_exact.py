@@ -489,3 +489,35 @@ def test_parallel_backends_run_in_a_child_forked_after_the_parent_used_every_cor
     for name in ("own.grid_parallel", "own.sap_parallel"):
         outcome = run_isolated(Job(name, params={"parallel_from": 0}, timeout_s=120.0), traj)
         assert outcome.status == "ok" and all(row["missed"] == 0 for row in outcome.rows), outcome.status
+
+
+def test_grid_cells_are_sized_to_the_objects_under_the_bound_not_to_a_huge_one():
+    # One ball of 10x the largest radius among radii 4 to 8: it goes to the large bucket and the
+    # cells stay one diameter of the largest of the others.
+    rng = np.random.default_rng(1)
+    radii = np.r_[rng.uniform(4.0, 8.0, 999), 80.0]
+    positions = rng.uniform(0.0, 800.0, (1000, 2))
+    grid = engines.create("own.grid")
+    grid.reset(positions, radii)
+    assert grid.stats()["large"] == 1
+    assert 2 * radii[:-1].max() <= grid.stats()["cell"] < 2 * radii[:-1].max() * (1 + 1e-6)
+    assert np.array_equal(np.sort(keys(grid.pairs(), 1000)), keys(brute_pairs(positions, radii), 1000))
+
+
+def test_verlet_default_skin_shrinks_where_lists_live_a_frame_and_stays_where_they_last():
+    fast = simulate(generate("uniform", 600, seed=3, speed=3000.0), frames=12)
+    calm = simulate(generate("uniform", 600, seed=3), frames=12)
+    for traj, shrinks in ((fast, True), (calm, False)):
+        verlet = engines.create("own.verlet")
+        verlet.reset(traj.positions[0], traj.scene.radii)
+        default = verlet._default_skin
+        for f in range(1, traj.frames):
+            verlet.update(traj.positions[f])
+            verlet.validate()
+            np.testing.assert_array_equal(np.sort(keys(verlet.pairs(), 600)), keys(traj.box_pairs[f], 600))
+        assert (verlet._skin < default) == shrinks, (verlet._skin, default)
+    fixed = engines.create("own.verlet", skin=10.0)
+    fixed.reset(fast.positions[0], fast.scene.radii)
+    for frame in fast.positions[1:]:
+        fixed.update(frame)
+    assert fixed._skin == 10.0  # a skin given is kept

@@ -25,6 +25,13 @@ from .common import PairCollector, emit
 from .grid import UniformGrid
 
 PRECISIONS = ("float64", "float32")
+# The default skin adapts to the motion (an explicit `skin` stays as given): a list that lived one
+# frame halves it (a skin that no frame's motion fits only fattens every rebuild), one that lived
+# LONG_LIVED frames grows it by half, back to the default at most; at zero skin every frame is a
+# rebuild, so the default is tried again every PROBE_AFTER of them. Measured at n = 4096 on the
+# tumbler (everything moves a cell per few frames): 0.535 ms a frame with the fixed skin, own.grid
+# 0.105; on the essay's motion, where a list lives about 40 frames, the skin stays the default.
+SHRINK_BELOW, LONG_LIVED, PROBE_AFTER, SMALLEST_SKIN_SHARE = 2, 8, 16, 1.0 / 16.0
 SKIN_FACTORS = (0.05, 0.1, 0.25, 0.5, 1.0, 2.0)  # the skin, in mean diameters, for a sweep
 
 
@@ -87,13 +94,22 @@ class VerletList(BroadPhase):
         positive = self._radii[self._radii > 0]
         default = float(positive.mean()) if len(positive) else 1.0  # half a mean diameter
         self._skin = float(self.params["skin"]) if self.params["skin"] is not None else default
+        self._default_skin, self._adapts = self._skin, self.params["skin"] is None and self.params["every"] is None
+        self._bare_rebuilds = 0  # rebuilds in a row at zero skin
         self._grid = UniformGrid()
+        self._built_skin = None
         self._build(self._rounded(positions))
         self._frame = 0
         self._stats = {"rebuilds": 0}
 
     def _build(self, positions: np.ndarray) -> None:
-        self._grid.reset(positions, self._radii + 0.5 * self._skin)
+        # The grid is moved, not built again, while the fat radii stay (its counting sort keeps
+        # last frame's order): at zero skin on the tumbler, 0.306 to 0.2 ms a frame at n = 4096.
+        if self._built_skin == self._skin:
+            self._grid.update(positions)
+        else:
+            self._grid.reset(positions, self._radii + 0.5 * self._skin)
+            self._built_skin = self._skin
         self._list = self._grid.pairs()
         self._anchor = positions.copy()  # where the list was built
         self._positions = positions
@@ -105,13 +121,28 @@ class VerletList(BroadPhase):
         every = self.params["every"]
         due = (self._since >= every) if every is not None else largest_step(positions, self._anchor) > 0.5 * self._skin
         if due:
+            if self._adapts:
+                self._adapt_skin(self._since)
             self._build(positions)
             self._stats["rebuilds"] += 1
+            self._stats["skin"] = self._skin
         self._positions = positions
+
+    def _adapt_skin(self, lived: int) -> None:
+        """The skin for the next list, from how many frames the last one lived (see SHRINK_BELOW)."""
+        if self._skin == 0.0:
+            self._bare_rebuilds += 1
+            if self._bare_rebuilds >= PROBE_AFTER:
+                self._skin, self._bare_rebuilds = self._default_skin, 0
+        elif lived < SHRINK_BELOW:
+            half = 0.5 * self._skin
+            self._skin = half if half >= SMALLEST_SKIN_SHARE * self._default_skin else 0.0
+        elif lived >= LONG_LIVED:
+            self._skin = min(1.5 * self._skin, self._default_skin)
 
     def _pairs(self):
         self._stats["listed"] = len(self._list)
-        if self.params["fat"]:
+        if self.params["fat"] or (self._skin == 0.0 and self._since == 0):  # the list is this frame's pairs
             return self._list.copy()
         out, _ = self._collect(filter_pairs, self._list, self._positions, self._radii)
         return out
