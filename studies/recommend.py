@@ -172,6 +172,10 @@ def why(win: Entry, runner: Entry | None, traits: Traits) -> str:
     if method in ("tree", "kdtree"):
         reasons.append("a tree adapts to the mixed sizes and clumps" if traits.radius_spread >= 10 or traits.dispersion >= 3
                        else "a tree needs no size parameter")
+    recorded = traits.recorded_words()
+    if recorded:
+        reasons.append("measured on this recorded motion, with " + ", ".join(recorded)
+                       + " (traits the essay's motion lacks, which reorder the backends: docs/SCENES.md)")
     if win.tuned:
         reasons.append(f"tuned on this scene ({params_text(win)})")
     text = "; ".join(reasons) or "it was fastest on this scene"

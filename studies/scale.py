@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 import engines
+from scenes import SCENE_KINDS
 from scenes.generate import at_essay_density
 
 from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli, warn_unavailable
@@ -33,7 +34,7 @@ from .lib.pool import Pool
 from .lib.results import RowWriter, ok_lines, read_rows, summarise
 from .lib.runner import Runner
 
-DISTS = ("uniform", "clusters")
+DISTS = ("uniform", "clusters")  # the default --dists: the essay's motion, spread and clumped
 # Compiles (or loads from the cache) every kernel of our backends, and says how long that took.
 # A one-line cached kernel is loaded first: numba's own start-up (its import, and the one-time
 # set-up of its compiler on the first kernel, 1 s here, which any numba program pays) is then
@@ -93,9 +94,10 @@ def growth_exponent(d: pd.DataFrame) -> float:
 
 def figure(medians: pd.DataFrame, path: Path) -> dict[tuple[str, str], float]:
     exponents = {}
-    fig = new_figure(figsize=(7 * len(DISTS), 5.5))
-    axes = fig.subplots(1, len(DISTS), sharey=True)
-    for ax, dist in zip(np.atleast_1d(axes), DISTS):
+    dists = list(dict.fromkeys(medians.dist))
+    fig = new_figure(figsize=(7 * len(dists), 5.5))
+    axes = fig.subplots(1, len(dists), sharey=True)
+    for ax, dist in zip(np.atleast_1d(axes), dists):
         for backend, d in medians[medians.dist == dist].groupby("backend", sort=False):
             k = exponents[(dist, backend)] = growth_exponent(d)
             ax.plot(d.n, d.ms, "-o", ms=3, lw=1.2, label=f"{backend} (n^{k:.2f})")
@@ -217,6 +219,9 @@ def parser() -> Parser:
     p = Parser(prog="python -m studies.scale", description=__doc__.split("\n\n")[0])
     add_backends_option(p)
     p.add_argument("--max-log2-n", type=int, default=20, help="largest n as a power of two (default 20)")
+    p.add_argument("--dists", default=",".join(DISTS), metavar="KIND[,KIND]",
+                   help=f"scene kinds, from {', '.join(SCENE_KINDS)} (default {','.join(DISTS)}; a family "
+                        "recorded with pymunk is recorded once per n, which takes minutes past 2^16)")
     # Most jobs take seconds, even at 2^20. The timeout stops the few that would take minutes: on
     # the clustered scene at n = 262144 a job (build, frames, exact checks of dense frames) exceeds it (a
     # limit of 300 s reached that size, but let each Chipmunk backend spend all of it at n = 32768).
@@ -230,6 +235,10 @@ def parse(argv: list[str] | None):
     args = parse_checked(parser(), argv)
     if not 6 <= args.max_log2_n <= 24:
         raise CliError("--max-log2-n must be 6..24")
+    args.dist_list = [d.strip() for d in args.dists.split(",") if d.strip()]
+    unknown = [d for d in args.dist_list if d not in SCENE_KINDS]
+    if unknown or not args.dist_list:
+        raise CliError(f"--dists: unknown {', '.join(unknown) or 'none given'}; known: {', '.join(SCENE_KINDS)}")
     return args
 
 
@@ -237,11 +246,11 @@ def measure(args, chosen: list[str], runner: Runner) -> None:
     """Every backend at doubling n; a backend that does not finish a size (over the budget, a
     crash, a timeout) is not run at larger sizes."""
     sizes = [2**k for k in range(6, args.max_log2_n + 1)]
-    scenes = {(dist, n): at_essay_density(dist, n) for dist in DISTS for n in sizes}
+    scenes = {(dist, n): at_essay_density(dist, n) for dist in args.dist_list for n in sizes}
     # One chain per scene kind and backend, smallest n first; the chains run side by side.
     chains = [[Job(backend, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout, memory_mb=args.memory,
                    scene=scenes[dist, n], frames=args.frames) for n in sizes]
-              for dist in DISTS for backend in chosen]
+              for dist in args.dist_list for backend in chosen]
     runner.run_chains(chains, desc="scale")
 
 

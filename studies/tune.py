@@ -23,6 +23,7 @@ import pandas as pd
 import engines
 from own.grid import GRID_CELL_FACTORS, MAX_CELLS_PER_OBJECT
 from own.sap import SPARSE_PAIRS_PER_OBJECT
+from scenes import FAMILIES as RECORDED_FAMILIES
 from scenes import Scene, generate
 
 from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli, warn_unavailable
@@ -44,6 +45,8 @@ FAMILIES: dict[str, dict[str, Any]] = {
     "gauss_x r=10": {"dist": "gauss_x", "radius": 10.0},
     "clusters r=10": {"dist": "clusters", "radius": 10.0},
     "mixed r=1..100": {"dist": "uniform", "radii": (1.0, 100.0)},
+    # Recorded with pymunk (scenes/families.py), radii 4 to 8.
+    **{f"{family} r=4..8": {"dist": family} for family in RECORDED_FAMILIES},
 }
 FAMILY_SIZES = (1024, 8192)
 OWN = ["own.grid", "own.quadtree", "own.sap"]

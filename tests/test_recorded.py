@@ -196,3 +196,26 @@ def test_stress_measures_a_trajectory_and_tradeoff_refuses_a_bad_one_before_touc
         with pytest.raises(CliError, match="header must be frame,id,x,y,r"):
             study.main(["--trajectory", str(bad), "--out", str(tmp_path / "untouched")])
         assert not (tmp_path / "untouched").exists()
+
+
+def test_recommend_traits_name_statics_spawning_and_resting_contact():
+    from studies.lib.traits import measure_traits
+
+    rain = measure_traits(simulate(generate("rain", 400, seed=2), 6))
+    assert rain.static_share == 0.25 and rain.spawn_rate > 0
+    words = ", ".join(rain.words())
+    assert "25% of the objects static" in words and "appear or go per frame" in words
+    pile = measure_traits(simulate(generate("pile", 400, seed=2), 6))
+    assert pile.resting_share >= 0.5 and "resting contact" in ", ".join(pile.words())
+    essay = measure_traits(simulate(generate("uniform", 400, seed=2), 3))
+    assert essay.recorded_words() == []
+
+
+def test_scale_takes_a_recorded_family(tmp_path):
+    from studies import scale
+
+    out = tmp_path / "scale"
+    assert scale.main(["--quick", "--max-log2-n", "8", "--dists", "uniform,pile", "--backends", "own.grid",
+                       "--out", str(out)]) == 0
+    rows = pd.read_csv(out / "results.csv")
+    assert set(rows.dist) == {"uniform", "pile"} and set(rows.n) == {64, 128, 256}

@@ -17,6 +17,8 @@ WIDE_SPREAD = 10.0  # largest over smallest radius
 CLUMPED = 3.0  # index of dispersion of cell counts (1 for uniformly random placement)
 CONCENTRATED = 0.6  # spread along an axis over that of a uniform placement on the same extent
 FAST = 0.5  # displacement per frame in median radii
+RESTING = 0.05  # an object moving less than this many of its radii per frame rests (jitters in place)
+RESTING_CONTACT = 0.5  # share of the movers at rest that makes it a scene of resting contact
 
 
 @dataclass
@@ -28,6 +30,26 @@ class Traits:
     concentration_y: float
     step_in_radii: float  # median displacement per frame / median radius
     coverage: float  # summed box area over the extent's area
+    # The traits of recorded scenes (0 for the essay's motion): objects that never move, objects
+    # that appear or go, movers at rest, and movers over a radius per frame.
+    static_share: float = 0.0
+    spawn_rate: float = 0.0  # objects appearing or going per frame, over n
+    resting_share: float = 0.0  # of the moving objects, those touching another under RESTING radii per frame
+    fast_share: float = 0.0  # of the moving objects, those over one radius per frame
+
+    def recorded_words(self) -> list[str]:
+        """The traits of a recorded scene that decide between broad phases, in plain words."""
+        out = []
+        if self.static_share > 0:
+            out.append(f"{self.static_share:.0%} of the objects static")
+        if self.spawn_rate > 0:
+            out.append(f"{self.spawn_rate:.1%} of the objects appear or go per frame")
+        if self.resting_share >= RESTING_CONTACT:
+            out.append(f"resting contact ({self.resting_share:.0%} of the movers touch another and jitter under "
+                       f"{RESTING:g} radii per frame)")
+        if 0 < self.fast_share < 0.1:
+            out.append(f"a few fast objects ({self.fast_share:.1%} over a radius per frame)")
+        return out
 
     def words(self) -> list[str]:
         """Short phrases, the ones that matter first."""
@@ -48,7 +70,7 @@ class Traits:
         else:
             out.append(f"coherent motion ({self.step_in_radii:.2g} radii per frame)")
         out.append(f"boxes cover {self.coverage:.0%} of the extent")
-        return out
+        return out + self.recorded_words()
 
 
 def measure_traits(traj: Trajectory) -> Traits:
@@ -69,7 +91,26 @@ def measure_traits(traj: Trajectory) -> Traits:
     conc = unit.std(axis=0) * np.sqrt(12) if n > 1 else np.ones(2)  # std against a uniform placement's
     steps = (np.abs(np.diff(0.5 * traj.positions, axis=0)).max(axis=2) * 2.0 if traj.frames > 1
              else np.zeros((1, n)))
+    # Only movers alive in both frames of a step count: a parked or static object is no motion.
+    alive = traj.alive if traj.alive is not None else np.ones((traj.frames, n), dtype=bool)
+    moving = alive[1:] & alive[:-1] if traj.frames > 1 else np.ones((1, n), dtype=bool)
+    static = traj.scene.static
+    if static is not None:
+        moving = moving & ~static
     median_r = float(np.median(radii)) if n else 0.0
-    step = float(np.median(steps) / median_r) if median_r > 0 and n else 0.0
+    step = float(np.median(steps[moving]) / median_r) if median_r > 0 and moving.any() else 0.0
+    in_radii = steps[moving] / np.maximum(np.broadcast_to(radii, steps.shape)[moving], 1e-300)
+    # Resting contact: slow and touching another object (the essay's objects are slow too, 0.02
+    # radii a frame, but seldom touch); contacts of the first frame whose pairs were computed.
+    touching = np.zeros(n, dtype=bool)
+    first = next((c for c in traj.contacts if c is not None), None)
+    if first is not None and len(first):
+        touching[np.asarray(first).ravel()] = True
+    in_contact = np.broadcast_to(touching, steps.shape)[moving]
+    resting = float(((in_radii < RESTING) & in_contact).mean()) if in_radii.size else 0.0
+    fast = float((in_radii > 1.0).mean()) if in_radii.size else 0.0
+    spawns = float(np.abs(np.diff(alive.astype(np.int8), axis=0)).sum() / ((traj.frames - 1) * n)) \
+        if traj.alive is not None and traj.frames > 1 and n else 0.0
     coverage = float((4 * radii**2).sum() / np.prod(extent + 2 * (radii.max() if n else 0)))
-    return Traits(n, spread, dispersion, float(conc[0]), float(conc[1]), step, coverage)
+    return Traits(n, spread, dispersion, float(conc[0]), float(conc[1]), step, coverage,
+                  traj.scene.static_share, spawns, resting, fast)
