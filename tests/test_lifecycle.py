@@ -42,6 +42,7 @@ def run_through(backend, traj):
     for f in range(traj.frames):
         backend.update(traj.positions[f], traj.alive_at(f))
         got = backend.pairs()
+        backend.validate()  # the structure's invariants hold with objects absent and static
         assert is_canonical(got, n) is None, is_canonical(got, n)
         if traj.alive is not None:
             assert traj.alive[f][got].all(), f"{backend.name} paired an object that is not alive in frame {f}"

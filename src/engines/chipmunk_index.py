@@ -9,6 +9,11 @@ are compiled with numba (`cfunc`), so no Python runs inside a frame. Each object
 six doubles (box l, b, r, t and velocity) in one array whose address never changes; the pointer
 to a record is the object Chipmunk stores, and its offset in the array is the object's index.
 
+Statics and spawning go Chipmunk's own way, as a Space does it (`lifecycle = "native"`): static
+objects go into a static index (a tree; a hash for the hash) attached to the dynamic one, which
+queries each moving object against it inside `reindexQuery` and never pairs two statics; an
+object that appears or goes is one `insert` or `remove` in its index.
+
 The candidates are the index's raw output, not filtered: Sweep1D sweeps x only (every pair whose
 x intervals overlap, strictly: boxes that only touch along x are not reported); the hash reports
 every pair that shares a cell (no box test); the tree reports pairs of fat boxes (10% of each
@@ -106,21 +111,40 @@ COLLECT = ffi.cast("cpSpatialIndexQueryFunc", _collect.address)
 class _ChipmunkIndex(BroadPhase):
     exact = False
     reports = "boxes"
+    lifecycle = "native"
 
-    def _new_index(self, positions: np.ndarray, radii: np.ndarray):
+    def _new_index(self, positions: np.ndarray, radii: np.ndarray, static_index):
         raise NotImplementedError
+
+    def _new_static_index(self, positions: np.ndarray, radii: np.ndarray):
+        """The index statics go into: a tree without the velocity term (they never move)."""
+        return lib.cpBBTreeNew(BOX_OF, ffi.NULL)
 
     def _reset(self, positions, radii):
         self.close()
         self._records = np.zeros((self.n, RECORD))
         self._previous = positions.copy()
         self._write_boxes(positions)
-        self._index = self._new_index(positions, radii)
-        base = self._records.ctypes.data
-        for i in range(self.n):
-            self._index.klass.insert(self._index, ffi.cast("void *", base + i * RECORD_BYTES), i)
+        self._is_static = self.static if self.static is not None else np.zeros(self.n, dtype=bool)
+        if self._is_static.any():
+            self._static_index = self._new_static_index(positions, radii)
+        self._index = self._new_index(positions, radii, self._static_index or ffi.NULL)
+        alive = self.alive if self.alive is not None else np.ones(self.n, dtype=bool)
+        for i in np.flatnonzero(alive).tolist():
+            self._insert(i)
         self._buffer = np.zeros(HEADER + 2 * max(64, 4 * self.n), dtype=np.int64)
         self._engine_s = None
+
+    def _index_of(self, i: int):
+        return self._static_index if self._is_static[i] else self._index
+
+    def _insert(self, i: int) -> None:
+        index = self._index_of(i)
+        index.klass.insert(index, ffi.cast("void *", self._records.ctypes.data + i * RECORD_BYTES), i)
+
+    def _remove(self, i: int) -> None:
+        index = self._index_of(i)
+        index.klass.remove(index, ffi.cast("void *", self._records.ctypes.data + i * RECORD_BYTES), i)
 
     def _write_boxes(self, positions: np.ndarray) -> None:
         r = self.radii
@@ -133,6 +157,12 @@ class _ChipmunkIndex(BroadPhase):
         self._write_boxes(positions)
         self._records[:, 4:6] = (positions - self._previous) / FRAME_DT
         self._previous = positions.copy()
+        if len(self.removed) or len(self.spawned):
+            for i in self.removed.tolist():
+                self._remove(i)
+            self._records[self.spawned, 4:6] = 0.0  # no velocity from where a new object's slot was parked
+            for i in self.spawned.tolist():
+                self._insert(i)
 
     def _pairs(self):
         buffer = self._buffer
@@ -154,9 +184,10 @@ class _ChipmunkIndex(BroadPhase):
         return self._engine_s
 
     def close(self):
-        if getattr(self, "_index", None) is not None:
-            lib.cpSpatialIndexFree(self._index)
-        self._index = None
+        for name in ("_index", "_static_index"):  # the dynamic index first: it refers to the static one
+            if getattr(self, name, None) is not None:
+                lib.cpSpatialIndexFree(getattr(self, name))
+            setattr(self, name, None)
 
     def __del__(self):
         try:
@@ -173,8 +204,8 @@ class ChipmunkSweep1D(_ChipmunkIndex):
     method = "sweep"
     breaks = "Chipmunk's Sweep1D tests x intervals strictly (`min < max`): boxes that only touch along x are never reported."
 
-    def _new_index(self, positions, radii):
-        return lib.cpSweep1DNew(BOX_OF, ffi.NULL)
+    def _new_index(self, positions, radii, static_index):
+        return lib.cpSweep1DNew(BOX_OF, static_index)
 
 
 class ChipmunkTreeIndex(_ChipmunkIndex):
@@ -184,8 +215,8 @@ class ChipmunkTreeIndex(_ChipmunkIndex):
     name = "chipmunk.bbtree_index"
     method = "tree"
 
-    def _new_index(self, positions, radii):
-        index = lib.cpBBTreeNew(BOX_OF, ffi.NULL)
+    def _new_index(self, positions, radii, static_index):
+        index = lib.cpBBTreeNew(BOX_OF, static_index)
         lib.cpBBTreeSetVelocityFunc(index, VELOCITY_OF)
         return index
 
@@ -200,9 +231,17 @@ class ChipmunkHashIndex(HashCellGuard, _ChipmunkIndex):
     defaults = {"dim": None, "count": None}
     sweeps = HASH_SWEEPS
 
-    def _new_index(self, positions, radii):
+    def _new_index(self, positions, radii, static_index):
+        return lib.cpSpaceHashNew(self._configure(positions, radii), self._count, BOX_OF, static_index)
+
+    def _new_static_index(self, positions, radii):
+        """A hash of the same cells, as a Space that uses the hash keeps its statics."""
+        return lib.cpSpaceHashNew(self._configure(positions, radii), self._count, BOX_OF, ffi.NULL)
+
+    def _configure(self, positions, radii) -> float:
+        """The cell size (checked against the objects) and the cell count; the cell size returned."""
         dim = self.params["dim"] or (4.0 * float(radii.mean()) if self.n else 1.0) or 1.0
-        count = self.params["count"] or max(1000, 10 * self.n)
+        self._count = int(self.params["count"] or max(1000, 10 * self.n))
         self._set_dim(dim)
         self._check_cells(positions)
-        return lib.cpSpaceHashNew(self._dim, int(count), BOX_OF, ffi.NULL)
+        return self._dim

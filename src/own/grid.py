@@ -73,10 +73,14 @@ def key_space(layout):
 
 @nb.njit(cache=True, inline="always")
 def cell_key(x, y, r, limit, space):
-    """Key of an object at (x, y) of radius r (see grid_build): its cell's, or the large bucket's."""
+    """Key of an object at (x, y) of radius r (see grid_build): its cell's, the large bucket's, or
+    for a radius of NaN (an object not alive, UniformGrid's lifecycle) the absent bucket's, the
+    key after the large one, which the pair search never reads."""
     ox, oy, inv_x, inv_y, last_x, last_y, w, large = space
     c = cell_of(y, oy, inv_y, last_y) * w + cell_of(x, ox, inv_x, last_x) + 1
-    return c if 2.0 * r <= limit else large
+    if 2.0 * r <= limit:
+        return c
+    return large if 2.0 * r > limit else large + 1
 
 
 @nb.njit(cache=True, inline="always")
@@ -150,7 +154,8 @@ def grid_build(xy, radii, order, last_key, layout, limit, start, key, ids, centr
 
     Keys live in a padded key space: rows of nx + 2 cells (an empty column on each side) and one
     empty row on top, so the pair search needs no edge cases (each costs a branch per object).
-    Cell (cx, cy) has key cy * (nx + 2) + cx + 1; the large bucket has key (ny + 1) * (nx + 2).
+    Cell (cx, cy) has key cy * (nx + 2) + cx + 1; the large bucket has key (ny + 1) * (nx + 2),
+    and the objects not alive (radius NaN) the key after it.
     `xy`, `radii` and `last_key` are per slot of `order` (this frame's centres, gathered; last
     frame's slot radii and keys, or the input radii and -1s). Fills slot ids, centres (n, 2), keys
     and radii, and `key` with the keys in `order` (it may be `last_key` itself). Every array is the
@@ -162,10 +167,10 @@ def grid_build(xy, radii, order, last_key, layout, limit, start, key, ids, centr
     n = order.shape[0]
     space = key_space(layout)
     large = space[-1]
-    if start.shape[0] == large + 2:
+    if start.shape[0] == large + 3:
         start[:] = 0
     else:
-        start = np.zeros(large + 2, dtype=start.dtype)
+        start = np.zeros(large + 3, dtype=start.dtype)
     moved = shifts = 0
     for k in range(n):
         c, c0 = cell_key(xy[k, 0], xy[k, 1], radii[k], limit, space), last_key[k]
@@ -175,7 +180,7 @@ def grid_build(xy, radii, order, last_key, layout, limit, start, key, ids, centr
             moved += 1
             shifts += abs(c - c0)
     total = 0
-    for c in range(large + 2):  # start[c] = end of bucket c (a running sum: no reload per cell)
+    for c in range(large + 3):  # start[c] = end of bucket c (a running sum: no reload per cell)
         total += start[c]
         start[c] = total
     # Backwards, filling each bucket from its end: stable. When `order` is last frame's, the
@@ -252,9 +257,8 @@ def grid_pairs(ids, centres, sradii, radius, skey, start, layout, limit, vector,
     """Box-overlap pairs into buf, each once; returns (pairs found, pair tests). `radius`: the
     slot radii again, or the one radius of every object (common.radius_of); `vector`: scan long
     runs of slots LANES at a time (compress.py)."""
-    n = ids.shape[0]
     ox, oy, inv_x, inv_y, last_x, last_y, w, large = key_space(layout)
-    first_large = start[large]
+    first_large, end_large = start[large], start[large + 1]  # the objects not alive after them
     # Inlined once per value of `vector`, each copy with it constant: a loop that tests it per
     # scan was 5% slower on the uniform scene at n = 131072, where few scans are long. The vector
     # scan reads the centres by column (compress.scan_block).
@@ -262,17 +266,17 @@ def grid_pairs(ids, centres, sradii, radius, skey, start, layout, limit, vector,
         count, tests = small_against_small(ids, centres, radius, skey, start, w, first_large, True, buf)
     else:
         count, tests = small_against_small(ids, centres, radius, skey, start, w, first_large, False, buf)
-    if first_large == n:
+    if first_large == end_large:
         return count, tests
     # Large against small: the cells their box grown by a small radius covers (covered_cells).
     reach = 0.5 * max(limit, 0.0)
-    for a in range(first_large, n):
+    for a in range(first_large, end_large):
         cx0, cx1, cy0, cy1 = covered_cells(centres[a, 0], centres[a, 1], sradii[a] + reach, layout)
         for cy in range(cy0, cy1 + 1):
             s, e = start[cy * w + cx0 + 1], start[cy * w + cx1 + 2]
             tests += e - s
             count = scan_circles(centres, sradii, ids, a, s, e, buf, count)
-    return large_against_large(centres, sradii, ids, first_large, buf, count, tests)
+    return large_against_large(centres, sradii, ids, first_large, end_large, buf, count, tests)
 
 
 @nb.njit(cache=True, inline="always")
@@ -286,10 +290,10 @@ def covered_cells(x, y, reach, layout):
 
 
 @nb.njit(cache=True)
-def large_against_large(centres, sradii, ids, first_large, buf, count, tests):
-    """Pairs among slots first_large.. (the large bucket): a sweep along x, each candidate tested
-    as a scan of one slot. Returns (pairs found, pair tests), counting on from the given ones."""
-    lx = centres[first_large:, 0] - sradii[first_large:]
+def large_against_large(centres, sradii, ids, first_large, end, buf, count, tests):
+    """Pairs among slots first_large..end-1 (the large bucket): a sweep along x, each candidate
+    tested as a scan of one slot. Returns (pairs found, pair tests), counting on from the given ones."""
+    lx = centres[first_large:end, 0] - sradii[first_large:end]
     by_x = np.argsort(lx)
     for u in range(by_x.shape[0]):
         a = first_large + by_x[u]
@@ -476,9 +480,15 @@ class UniformGrid(CellLayout):
     tests pairs without reading radii where every radius is equal (off: the general kernel).
     `vector` tests runs of slots 8 at a time and compresses the hits (compress.py); by default
     where the CPU has AVX-512, on which that is one instruction (False: the scalar scan only).
+
+    Statics and spawning natively: an object not alive has a radius of NaN in the grid, which puts
+    it in the absent bucket after the large one (cell_key), never scanned; appearing or going is a
+    change of key that the repair or the counting sort handles as a move, so nothing is rebuilt.
+    Pairs of two statics are dropped after the search (the cells hold both kinds).
     """
 
     name = "own.grid"
+    lifecycle = "native"
     defaults = {"p": None, "cell": None, "coherent": True, "specialise": True, "vector": None}
 
     def __init__(self, **params):
@@ -489,6 +499,9 @@ class UniformGrid(CellLayout):
             raise ValueError(f"{self.name}: vector must be True, False or None (where the CPU has AVX-512), "
                              f"got {vector!r}")
         self._vector = NATIVE if vector is None else bool(vector)
+        # Kept across resets, as every backend's collector is: a fresh one's first buffer is too
+        # small for a frame's pairs, so the pair search ran twice (rain, rebuilt every frame).
+        self._collect = PairCollector()
 
     def _reset(self, positions, radii):
         self._start_layout(radii)
@@ -498,24 +511,27 @@ class UniformGrid(CellLayout):
         # centres, not boxes: 16 bytes less per slot for the sort and the repair to move, for a
         # few flops in the scan (4-5% faster at every n). They are stored by column (order="F"),
         # so that the vector scan loads 8 x and 8 y with a load each.
+        # The radii as the kernels see them: NaN for an object not alive (see the class docstring).
+        self._live_radii = radii if self.alive is None else np.where(self.alive, radii, np.nan)
         self._slots = (np.arange(n, dtype=np.int64), np.empty((n, 2), order="F"), np.full(n, -1, dtype=np.int64),
-                       radii.copy())
+                       self._live_radii.copy())
         self._spare = (np.empty(n, dtype=np.int64), np.empty((n, 2), order="F"), np.empty(n, dtype=np.int64),
                        np.empty(n))
         self._key, self._xy = np.empty(n, dtype=np.int64), np.empty((n, 2), order="F")
         self._input_order = np.arange(n, dtype=np.int64)
         self._start = np.zeros(0, dtype=np.int64)
-        self._collect = PairCollector()
         self._repair = False
         self._update(positions)
 
     def _update(self, positions):
         self._positions = positions
         ids, centres, key, sradii = self._slots
+        if len(self.spawned) or len(self.removed):
+            self._set_alive(ids, sradii)
         if self.params["coherent"]:  # last frame's cell order
             order, radii, last_key, xy = ids, sradii, key, centres
         else:  # input order, in which the build left last frame's keys in self._key
-            order, radii, last_key, xy = self._input_order, self.radii, self._key, self._xy
+            order, radii, last_key, xy = self._input_order, self._live_radii, self._key, self._xy
         relayout, self._limit, self._start, moved, shifts, swaps = grid_update(
             positions, radii, order, last_key, xy, self._p, self._cell, self._max_cells, self._layout,
             self._start, self._key, self._slots, self._spare, self._repair,
@@ -529,6 +545,17 @@ class UniformGrid(CellLayout):
         # Kept raw, made a dict only when asked: building it every frame costs 4% of a frame at n = 2048.
         self._counters = {"moved": moved, "relayout": int(relayout), "swaps": swaps}
 
+    def _set_alive(self, ids: np.ndarray, sradii: np.ndarray) -> None:
+        """This frame's arrivals get their radius back, and the objects gone NaN, by object and by slot."""
+        if self._live_radii is self.radii:
+            self._live_radii = self.radii.copy()
+        self._live_radii[self.spawned] = self.radii[self.spawned]
+        self._live_radii[self.removed] = np.nan
+        changed = np.concatenate([self.spawned, self.removed])
+        slot_of = np.empty(self.n, dtype=np.int64)
+        slot_of[ids] = np.arange(self.n)
+        sradii[slot_of[changed]] = self._live_radii[changed]
+
     def _large_key(self) -> int:
         """Key of the large bucket in grid_build's padded key space."""
         return int(key_space(self._layout)[-1])
@@ -539,13 +566,17 @@ class UniformGrid(CellLayout):
         out, (tests,) = self._collect(grid_pairs, ids, centres, sradii, radius, key, self._start, self._layout,
                                       self._limit, self._vector)
         self._counters["tests"] = tests
+        if self.static is not None:
+            out = out[~(self.static[out[:, 0]] & self.static[out[:, 1]])]
         return out
 
     def stats(self):
         if not self._counters:  # nothing built yet
             return {}
         return {"cells": int(self._layout[NX] * self._layout[NY]), "cell": float(self._layout[CW]),
-                "large": self.n - int(self._start[self._large_key()]), "vector": int(self._vector),
+                "large": int(self._start[self._large_key() + 1] - self._start[self._large_key()]),
+                **({"absent": self.n - int(self._start[self._large_key() + 1])} if self.alive is not None else {}),
+                "vector": int(self._vector),
                 **self._counters, **self._left_out}
 
     def validate(self):
@@ -554,8 +585,8 @@ class UniformGrid(CellLayout):
         start, (ids, _, key, sradii) = self._start, self._slots
         assert np.array_equal(np.sort(ids), np.arange(self.n)), "slot ids are not a permutation"
         assert start[0] == 0 and start[-1] == self.n and (np.diff(start) >= 0).all(), "bucket starts are not a prefix sum"
-        assert np.array_equal(key, np.repeat(np.arange(large + 1), np.diff(start))), "slots are not sorted by key"
-        assert np.array_equal(sradii, self.radii[ids]), "slot radii are not the objects' radii"
+        assert np.array_equal(key, np.repeat(np.arange(large + 2), np.diff(start))), "slots are not sorted by key"
+        assert np.array_equal(sradii, self._live_radii[ids], equal_nan=True), "slot radii are not the objects' radii"
         small = 2.0 * sradii <= self._limit
         assert np.array_equal(small, key < large), "an object is in the wrong bucket for its size"
         assert self._limit < min(self._layout[CW], self._layout[CH]), "small objects could span two cells"

@@ -316,7 +316,7 @@ def large_pairs(state, head, layout, limit, buf, count, tests):
                     count += _boxes_overlap(xy, sr, a, b)
                     tests += 1
                     b = nxt[b]
-    return large_against_large(xy, sr, perm, first_large, buf, count, tests)
+    return large_against_large(xy, sr, perm, first_large, perm.shape[0], buf, count, tests)
 
 
 def new_state(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
