@@ -79,7 +79,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"recorded motion ({scene.motion.record(1).source or scene.meta.get('dist')}): {traj.frames} frames, "
                   f"{scene.static_share:.0%} of the objects static"
                   + (f", {alive.min()} to {alive.max()} of {scene.n} alive per frame" if alive is not None else ""))
-        out.meta(scene={**scene_columns(traj.scene), "box": scene.box, "frames": args.frames, "repeats": args.repeat},
+        out.meta(scene={**scene_columns(traj.scene), "box": scene.box, "frames": args.frames, "repeats": args.repeat,
+                        "statics_or_spawning": scene.static is not None or traj.alive is not None},
                  unavailable=unavailable)
         jobs = [Job(backend, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout,
                     memory_mb=args.memory, scene=scene, frames=args.frames) for backend in runnable]
@@ -97,6 +98,16 @@ def scene_meta_frames(meta: dict) -> int | None:
     return scene["frames"] * scene["repeats"] if "frames" in scene and "repeats" in scene else None
 
 
+def rebuild_note(table, meta: dict) -> str:
+    """On a scene with statics or spawning: the backends that took them the generic way (BroadPhase.lifecycle)."""
+    if not meta.get("scene", {}).get("statics_or_spawning") or table.empty:
+        return ""
+    generic = [b for b in table.index if b in engines.available() and engines.backend_class(b).lifecycle == "rebuild"]
+    return (f"statics and spawning reached {', '.join(generic)} through the interface's generic path (only the "
+            "objects alive, built anew when they change, pairs of two statics dropped after the search); the rest "
+            "took them natively") if generic else "every backend took statics and spawning natively"
+
+
 def report(folder: Path, check: bool) -> int:
     """The table, the headline and compare.png, from the rows in `folder`."""
     rows, complete = read_rows(folder)
@@ -110,7 +121,7 @@ def report(folder: Path, check: bool) -> int:
     headline = ours_against_engines(table) if not table.empty else None
     if headline:
         print(headline)
-    for note in (cpu_models_note(rows), left_out_note(rows)):
+    for note in (cpu_models_note(rows), left_out_note(rows), rebuild_note(table, meta)):
         if note:
             print(note)
     print("times: median ±interquartile range over all timed frames and repeats; engine bp: the engine's own measure "
