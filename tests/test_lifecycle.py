@@ -107,3 +107,19 @@ def test_narrow_phase_of_the_reference_keeps_the_lifecycle():
     traj = simulate(lifecycle_scene(), 4)
     for f in range(traj.frames):
         assert np.array_equal(traj.contacts[f], narrow_phase(traj.positions[f], traj.scene.radii, traj.box_pairs[f]))
+
+
+def test_own_grid_never_sorts_or_tests_statics_against_each_other():
+    # 100 statics piled on one spot (4950 overlapping pairs among them) and one mover.
+    positions = np.zeros((101, 2))
+    positions[100] = (500.0, 500.0)
+    static = np.arange(101) < 100
+    grid = engines.create("own.grid")
+    grid.reset(positions, np.full(101, 5.0), static=static)
+    assert len(grid._slots[0]) == 1, "the grid's slots hold the mover alone"
+    assert grid.pairs().tolist() == [] and grid.stats()["tests"] == 0 and grid.stats()["static_tests"] == 0
+    positions[100] = (3.0, 0.0)  # into the pile: paired with every static, each tested once
+    grid.update(positions)
+    assert grid.pairs().tolist() == [[k, 100] for k in range(100)]
+    assert grid.stats()["static_tests"] == 100 and grid.stats()["statics"] == 100
+    grid.validate()
