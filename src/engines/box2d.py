@@ -7,7 +7,10 @@ update; `world.contacts` is then the set of pairs whose fat boxes overlap: its b
 output, reported as "boxes". Version 3.1 (`box2d.v3`): bodies moved in one batch call
 (`Bodies.set_transforms`), and the pairs kept from the contact begin and end touch events of
 each step: narrow-phase contacts, reported as "contacts" (sensors in v3 do not see each other).
-Box2D keeps positions in float32.
+Box2D keeps positions in float32. Version 3.1 takes statics and spawning natively: static
+objects are static bodies (never moved, never paired with each other: v3 keeps them in a tree of
+their own), and an object that appears or goes is a body enabled or disabled, which creates or
+destroys its proxies in the broad phase.
 """
 
 from __future__ import annotations
@@ -67,29 +70,42 @@ class Box2DV3(BroadPhase):
     breaks = FLOAT32_BREAKS
     exact = False
     reports = "contacts"
+    lifecycle = "native"
 
     def _reset(self, positions, radii):
         self._world = pyb2d3.World(gravity=(0.0, 0.0))
-        self._bodies = pyb2d3.Bodies()
+        self._bodies = pyb2d3.Bodies()  # the bodies that move, in the order of self._moving
         shape = pyb2d3.ShapeDef()
         shape.enable_contact_events = True
+        static = self.static if self.static is not None else np.zeros(self.n, dtype=bool)
+        alive = self.alive if self.alive is not None else np.ones(self.n, dtype=bool)
+        self._moving = np.flatnonzero(~static)
+        self._handles = {}
         for i, ((x, y), r) in enumerate(zip(positions.tolist(), radii.tolist())):
-            body = self._world.create_dynamic_body(position=(x, y))
+            body = (self._world.create_static_body if static[i] else self._world.create_dynamic_body)(position=(x, y))
             circle = pyb2d3.Circle()
             circle.radius = r
             body.create_circle_shape(shape, circle).user_data = i
-            self._bodies.append(body.id)
-        self._transforms = np.zeros((self.n, 4), np.float32)
+            if not static[i]:
+                self._bodies.append(body.id)
+            if not alive[i]:
+                body.enabled = False
+            self._handles[i] = body
+        self._transforms = np.zeros((len(self._moving), 4), np.float32)
         self._transforms[:, 2] = 1.0  # cos of the angle: no rotation
-        self._still = np.zeros((self.n, 2), np.float32)
+        self._still = np.zeros((len(self._moving), 2), np.float32)
         # The touching pairs as keys i * n + j, each at one slot of an array (removal moves the
         # last key into the freed slot), so that pairs() needs no loop over the pairs.
         self._keys = np.empty(max(16, self.n), np.int64)
         self._slot: dict[int, int] = {}
 
     def _update(self, positions):
-        self._transforms[:, :2] = positions
+        for i in self.removed.tolist():  # its proxy leaves the broad phase, its contacts end
+            self._handles[i].enabled = False
+        self._transforms[:, :2] = positions[self._moving]
         self._bodies.set_transforms(self._transforms)
+        for i in self.spawned.tolist():  # a proxy inserted where the object now is
+            self._handles[i].enabled = True
         self._bodies.set_linear_velocities(self._still)  # the solver pushed last frame's contacts apart
 
     def _pairs(self):
@@ -125,5 +141,6 @@ class Box2DV3(BroadPhase):
     def close(self):
         world = getattr(self, "_world", None)
         if world is not None:
+            self._handles = {}
             world.destroy()
             self._world = None
