@@ -5,7 +5,9 @@ box-overlap set itself, each circle is given a square sensor shape of side 2r by
 collision test is exactly the box test; `shape="circle"` uses circle shapes instead (then only
 truly overlapping circles come back). Bodies are kinematic, moved with pymunk's batch API;
 `pairs()` runs `space.step` (index update, pair search, shape collision; sensors skip the
-solver) and reads the arbiters in one batch call.
+solver) and reads the arbiters in one batch call. Statics and spawning natively: a static object
+is a shape on a static body, in the space's static index (never re-indexed, never paired with
+another static); an object that appears or goes is added to or removed from the space.
 """
 
 from __future__ import annotations
@@ -55,6 +57,7 @@ class _Chipmunk(BroadPhase):
     exact = False
     reports = "boxes"
     defaults = {"shape": "box"}
+    lifecycle = "native"
 
     def __init__(self, **params):
         super().__init__(**params)
@@ -73,35 +76,50 @@ class _Chipmunk(BroadPhase):
         # Drop an arbiter as soon as its pair stops colliding: the default (3 steps) reports stale pairs.
         space.collision_persistence = 1
         self._configure(space, positions, radii)
-        items = []
-        for (x, y), r in zip(positions.tolist(), radii.tolist()):
-            body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+        static = self.static if self.static is not None else np.zeros(self.n, dtype=bool)
+        alive = self.alive if self.alive is not None else np.ones(self.n, dtype=bool)
+        self._items = []  # (body, shape) of each object
+        for (x, y), r, fixed in zip(positions.tolist(), radii.tolist(), static.tolist()):
+            body = pymunk.Body(body_type=pymunk.Body.STATIC if fixed else pymunk.Body.KINEMATIC)
             body.position = (x, y)
             if self.params["shape"] == "box":
                 shape = pymunk.Poly.create_box(body, (2.0 * r, 2.0 * r), 0.0)
             else:
                 shape = pymunk.Circle(body, r)
             shape.sensor = True
-            items += (body, shape)
-        if items:
-            space.add(*items)
+            self._items.append((body, shape))
+        present = [part for i in np.flatnonzero(alive).tolist() for part in self._items[i]]
+        if present:
+            space.add(*present)
         self._space = space
         # Map Chipmunk's body ids to scene indices, and find the order the batch API visits bodies.
-        body_ids = np.array([b.id for b in items[0::2]], dtype=np.uint64)
+        body_ids = np.array([body.id for body, _ in self._items], dtype=np.uint64)
         self._id_order = np.argsort(body_ids)
         self._sorted_ids = body_ids[self._id_order]
-        visited = batch.Buffer()
-        batch.get_space_bodies(space, batch.BodyFields.BODY_ID, visited)
-        self._visit = self._indices(np.frombuffer(visited.int_buf(), dtype=np.uintp))
-        self._in_order = np.array_equal(self._visit, np.arange(self.n))
         self._positions = batch.Buffer()
         self._arbiters = batch.Buffer()
+        self._find_visit_order()
         self._update(positions)
+
+    def _find_visit_order(self) -> None:
+        """The objects in the order the batch API visits the space's bodies."""
+        visited = batch.Buffer()
+        batch.get_space_bodies(self._space, batch.BodyFields.BODY_ID, visited)
+        self._visit = self._indices(np.frombuffer(visited.int_buf(), dtype=np.uintp))
+        self._in_order = np.array_equal(self._visit, np.arange(self.n))
 
     def _indices(self, ids: np.ndarray) -> np.ndarray:
         return self._id_order[np.searchsorted(self._sorted_ids, ids.astype(np.uint64))]
 
     def _update(self, positions):
+        if len(self.removed) or len(self.spawned):
+            if len(self.removed):
+                self._space.remove(*[part for i in self.removed.tolist() for part in self._items[i]])
+            for i in self.spawned.tolist():
+                self._items[i][0].position = tuple(positions[i])
+            if len(self.spawned):
+                self._space.add(*[part for i in self.spawned.tolist() for part in self._items[i]])
+            self._find_visit_order()
         flat = (positions if self._in_order else positions[self._visit]).ravel().copy()
         self._positions.set_float_buf(flat)
         batch.set_space_bodies(self._space, batch.BodyFields.POSITION, self._positions)
