@@ -5,7 +5,9 @@ circles become spheres in the z = 0 plane (mass 1, no gravity, never stepped), m
 with `resetBasePositionAndOrientation` (there is no batch setter), and `pairs()` runs
 `performCollisionDetection` and reads `getContactPoints`. Bullet keeps contacts up to its
 contact breaking threshold (0.02 units) apart, and its tree uses fattened boxes: such pairs
-come back as false positives, not errors.
+come back as false positives, not errors. Statics and spawning natively: a static object is a
+body of mass 0 (Bullet's static set, never moved, never paired with another static), an object
+that appears or goes is a body created or removed.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from .pairs import canonical
 class _Bullet(BroadPhase):
     exact = False
     reports = "contacts"
+    lifecycle = "native"
     reset_flags = 0
     breaks = ("Bullet stops simulating a non-static object whose AABB extent has a squared length of 1e12 or more "
               "(btCollisionWorld::updateSingleAabb), i.e. spheres of radius ~5.8e5 and up; it cannot create spheres "
@@ -46,24 +49,40 @@ class _Bullet(BroadPhase):
             raise ValueError(f"{self.name}: Bullet cannot create a sphere of radius 0 (object {int(radii.argmin())})")
         self._call(pybullet.resetSimulation, self.reset_flags)
         self._call(pybullet.setGravity, 0.0, 0.0, 0.0)
-        # One collision shape per distinct radius, shared by the bodies of that size.
-        ids = np.empty(self.n, dtype=np.int64)
-        for r in np.unique(radii):
-            which = np.flatnonzero(radii == r)
-            shape = self._call(pybullet.createCollisionShape, pybullet.GEOM_SPHERE, radius=float(r))
-            for k in which:
-                x, y = positions[k]
-                ids[k] = self._call(
-                    pybullet.createMultiBody, baseMass=1.0, baseCollisionShapeIndex=shape,
-                    basePosition=[float(x), float(y), 0.0],
-                )
-        self._ids = ids
-        self._index = np.full(int(ids.max()) + 1 if self.n else 0, -1, dtype=np.int64)
-        self._index[ids] = np.arange(self.n)
+        self._shapes: dict[float, int] = {}  # one collision shape per distinct radius, shared
+        self._static = self.static if self.static is not None else np.zeros(self.n, dtype=bool)
+        self._ids = np.full(self.n, -1, dtype=np.int64)  # each object's body, -1 while it is not alive
+        self._index = np.full(2 * self.n + 16, -1, dtype=np.int64)  # body -> object
+        alive = self.alive if self.alive is not None else np.ones(self.n, dtype=bool)
+        for k in np.flatnonzero(alive).tolist():
+            self._create(k, positions[k])
+        self._find_movers()
+
+    def _create(self, k: int, xy: np.ndarray) -> None:
+        r = float(self.radii[k])
+        if r not in self._shapes:
+            self._shapes[r] = self._call(pybullet.createCollisionShape, pybullet.GEOM_SPHERE, radius=r)
+        uid = self._call(pybullet.createMultiBody, baseMass=0.0 if self._static[k] else 1.0,
+                         baseCollisionShapeIndex=self._shapes[r], basePosition=[float(xy[0]), float(xy[1]), 0.0])
+        if uid >= len(self._index):
+            self._index = np.concatenate([self._index, np.full(uid + 1, -1, dtype=np.int64)])
+        self._ids[k], self._index[uid] = uid, k
+
+    def _find_movers(self) -> None:
+        """The objects moved each frame: alive and not static, with their bodies."""
+        self._movers = np.flatnonzero((self._ids >= 0) & ~self._static)
+        self._mover_ids = self._ids[self._movers].tolist()
 
     def _update(self, positions):
+        if len(self.removed) or len(self.spawned):
+            for k in self.removed.tolist():
+                self._call(pybullet.removeBody, int(self._ids[k]))
+                self._index[self._ids[k]], self._ids[k] = -1, -1
+            for k in self.spawned.tolist():
+                self._create(k, positions[k])
+            self._find_movers()
         reset, client, still = pybullet.resetBasePositionAndOrientation, self._client, (0.0, 0.0, 0.0, 1.0)
-        for uid, (x, y) in zip(self._ids.tolist(), positions.tolist()):
+        for uid, (x, y) in zip(self._mover_ids, positions[self._movers].tolist()):
             reset(uid, (x, y, 0.0), still, physicsClientId=client)
 
     def _pairs(self):
