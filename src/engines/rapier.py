@@ -7,7 +7,10 @@ default). Per frame each collider's translation is set through the binding (ther
 setter), then `CollisionPipeline.step` updates the BVH and the pair set; `contact_pairs()` is every
 pair the broad phase found, whether or not the narrow phase found a contact: its boxes are
 enlarged by the prediction distance (`prediction`, default 0.002), so a few pairs a little apart
-come back too. Rapier computes in float32 here.
+come back too. Rapier computes in float32 here. Statics and spawning natively: a static object is
+a collider that keeps Rapier's default collision types, which skip pairs of two fixed colliders
+(the moving ones take every type, so they still pair with statics), and is never moved; an object
+that appears or goes is a collider inserted or removed.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ class RapierBvh(BroadPhase):
     exact = False
     reports = "boxes"
     defaults = {"prediction": 0.002}
+    lifecycle = "native"
     sweeps = (Knob("prediction", fixed([1e-4, 0.002, 0.02, 0.2, 2.0]), "prediction distance"),)
 
     def _reset(self, positions, radii):
@@ -34,21 +38,42 @@ class RapierBvh(BroadPhase):
         if not (isinstance(prediction, (int, float)) and np.isfinite(prediction) and prediction >= 0):
             raise ValueError(f"{self.name}: prediction must be a distance >= 0, got {prediction!r}")
         self._colliders = rapier3d.ColliderSet()
-        kinds = rapier3d.ActiveCollisionTypes.all()
-        self._handles = [
-            self._colliders.insert(rapier3d.Collider.ball(r).translation([x, y, 0.0]).active_collision_types(kinds)
-                                   .build())
-            for (x, y), r in zip(positions.tolist(), radii.tolist())]
-        # Handles are slots in insertion order: the object index (checked once here).
-        if any(h.index != i for i, h in enumerate(self._handles)):
-            raise RuntimeError(f"{self.name}: Rapier numbered its colliders out of insertion order")
+        self._static = self.static if self.static is not None else np.zeros(self.n, dtype=bool)
+        self._handles: list = [None] * self.n  # each object's collider while it is alive
+        self._object_of = np.full(self.n + 16, -1, dtype=np.int64)  # collider slot -> object (slots are reused)
+        alive = self.alive if self.alive is not None else np.ones(self.n, dtype=bool)
+        for k in np.flatnonzero(alive).tolist():
+            self._insert(k, positions[k])
+        self._find_movers()
         self._bodies, self._islands = rapier3d.RigidBodySet(), rapier3d.IslandManager()
         self._broad, self._narrow = rapier3d.BroadPhaseBvh(), rapier3d.NarrowPhase()
         self._pipeline = rapier3d.CollisionPipeline()
 
+    def _insert(self, k: int, xy: np.ndarray) -> None:
+        kinds = rapier3d.ActiveCollisionTypes.default_types() if self._static[k] else rapier3d.ActiveCollisionTypes.all()
+        handle = self._colliders.insert(rapier3d.Collider.ball(float(self.radii[k]))
+                                        .translation([float(xy[0]), float(xy[1]), 0.0]).active_collision_types(kinds)
+                                        .build())
+        if handle.index >= len(self._object_of):
+            self._object_of = np.concatenate([self._object_of, np.full(handle.index + 1, -1, dtype=np.int64)])
+        self._handles[k], self._object_of[handle.index] = handle, k
+
+    def _find_movers(self) -> None:
+        """The objects moved each frame: alive and not static, with their colliders."""
+        present = np.fromiter((h is not None for h in self._handles), dtype=bool, count=self.n)
+        self._movers = np.flatnonzero(present & ~self._static)
+        self._mover_handles = [self._handles[k] for k in self._movers.tolist()]
+
     def _update(self, positions):
+        if len(self.removed) or len(self.spawned):
+            for k in self.removed.tolist():
+                self._colliders.remove(self._handles[k], self._islands, self._bodies, False)
+                self._object_of[self._handles[k].index], self._handles[k] = -1, None
+            for k in self.spawned.tolist():
+                self._insert(k, positions[k])
+            self._find_movers()
         colliders = self._colliders
-        for handle, (x, y) in zip(self._handles, positions.tolist()):
+        for handle, (x, y) in zip(self._mover_handles, positions[self._movers].tolist()):
             colliders[handle].translation = [x, y, 0.0]
 
     def _pairs(self):
@@ -57,8 +82,8 @@ class RapierBvh(BroadPhase):
         found = self._narrow.contact_pairs()
         if not found:
             return EMPTY_PAIRS.copy()
-        a = np.fromiter((p.collider1.index for p in found), dtype=np.int64, count=len(found))
-        b = np.fromiter((p.collider2.index for p in found), dtype=np.int64, count=len(found))
+        a = self._object_of[np.fromiter((p.collider1.index for p in found), dtype=np.int64, count=len(found))]
+        b = self._object_of[np.fromiter((p.collider2.index for p in found), dtype=np.int64, count=len(found))]
         self._stats = {"pairs": len(found)}
         return np.column_stack([np.minimum(a, b), np.maximum(a, b)])
 
