@@ -7,10 +7,10 @@ update; `world.contacts` is then the set of pairs whose fat boxes overlap: its b
 output, reported as "boxes". Version 3.1 (`box2d.v3`): bodies moved in one batch call
 (`Bodies.set_transforms`), and the pairs kept from the contact begin and end touch events of
 each step: narrow-phase contacts, reported as "contacts" (sensors in v3 do not see each other).
-Box2D keeps positions in float32. Version 3.1 takes statics and spawning natively: static
-objects are static bodies (never moved, never paired with each other: v3 keeps them in a tree of
-their own), and an object that appears or goes is a body enabled or disabled, which creates or
-destroys its proxies in the broad phase.
+Box2D keeps positions in float32. Both take statics and spawning natively: static objects are
+static bodies (never moved, never paired with each other; v3 keeps them in a tree of their own),
+and an object that appears or goes is a body created or destroyed (2.3) or enabled or disabled
+(3.1), which inserts or removes its proxies in the broad phase.
 """
 
 from __future__ import annotations
@@ -34,19 +34,40 @@ class Box2DV2(BroadPhase):
     breaks = FLOAT32_BREAKS
     exact = False
     reports = "boxes"
+    lifecycle = "native"
     limits = Limits(coordinate=FLOAT32_MAX, radius=FLOAT32_MAX, why="Box2D 2.3's binding converts every value to "
                     "float32 and raises on one beyond its range")
 
     def _reset(self, positions, radii):
         self._world = Box2D.b2World(gravity=(0.0, 0.0), doSleep=False)
-        self._bodies = []
-        for i, ((x, y), r) in enumerate(zip(positions.tolist(), radii.tolist())):
-            body = self._world.CreateDynamicBody(position=(x, y))
-            body.CreateCircleFixture(radius=r, isSensor=True, density=1.0).userData = i
-            self._bodies.append(body)
+        self._static = self.static if self.static is not None else np.zeros(self.n, dtype=bool)
+        self._bodies: list = [None] * self.n  # each object's body while it is alive
+        alive = self.alive if self.alive is not None else np.ones(self.n, dtype=bool)
+        for i in np.flatnonzero(alive).tolist():
+            self._create(i, positions[i])
+        self._find_movers()
+
+    def _create(self, i: int, xy: np.ndarray) -> None:
+        """A static body for a static object (never moved, never paired with another static)."""
+        make = self._world.CreateStaticBody if self._static[i] else self._world.CreateDynamicBody
+        body = make(position=(float(xy[0]), float(xy[1])))
+        body.CreateCircleFixture(radius=float(self.radii[i]), isSensor=True, density=1.0).userData = i
+        self._bodies[i] = body
+
+    def _find_movers(self) -> None:
+        present = np.fromiter((b is not None for b in self._bodies), dtype=bool, count=self.n)
+        self._movers = np.flatnonzero(present & ~self._static)
+        self._moving_bodies = [self._bodies[i] for i in self._movers.tolist()]
 
     def _update(self, positions):
-        for body, xy in zip(self._bodies, positions.tolist()):
+        if len(self.removed) or len(self.spawned):  # proxies removed and inserted
+            for i in self.removed.tolist():
+                self._world.DestroyBody(self._bodies[i])
+                self._bodies[i] = None
+            for i in self.spawned.tolist():
+                self._create(i, positions[i])
+            self._find_movers()
+        for body, xy in zip(self._moving_bodies, positions[self._movers].tolist()):
             body.position = xy
 
     def _pairs(self):
@@ -60,7 +81,7 @@ class Box2DV2(BroadPhase):
         return canonical(a, b)
 
     def close(self):
-        self._bodies, self._world = [], None
+        self._bodies, self._moving_bodies, self._world = [], [], None
 
 
 class Box2DV3(BroadPhase):
