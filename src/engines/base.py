@@ -178,7 +178,8 @@ class BroadPhase(ABC):
         elif changed:
             self._rebuild(pos)
         else:
-            self._update(pos[self._alive_ids])
+            self._held_positions = pos[self._alive_ids]
+            self._update(self._held_positions)
         if changed:
             self.spawned = self.removed = NO_IDS
 
@@ -187,7 +188,8 @@ class BroadPhase(ABC):
         alive = self.alive if self.alive is not None else np.ones(self.objects, dtype=bool)
         self._alive_ids = np.flatnonzero(alive)
         self.radii, self.n = self._all_radii[self._alive_ids], len(self._alive_ids)
-        self._reset(np.ascontiguousarray(positions[self._alive_ids]), self.radii)
+        self._held_positions = np.ascontiguousarray(positions[self._alive_ids])
+        self._reset(self._held_positions, self.radii)
 
     def _check_limits(self, positions: np.ndarray, radii: np.ndarray | None = None) -> None:
         if self.limits is NO_LIMITS:  # our own backends: no cost per frame

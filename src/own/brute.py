@@ -7,6 +7,7 @@ import numpy as np
 from engines.base import BroadPhase, PairArray
 
 from .common import boxes
+from .statics import StaticsApart
 
 # Rows per block so that one block's boolean matrix stays around 8 M entries.
 _BLOCK_CELLS = 8_000_000
@@ -32,7 +33,7 @@ def brute_pairs(positions: np.ndarray, radii: np.ndarray) -> PairArray:
     return np.concatenate(found).astype(np.int64)
 
 
-class Brute(BroadPhase):
+class Brute(StaticsApart, BroadPhase):
     """Tests all n(n-1)/2 pairs. The reference the tests compare every other backend with."""
 
     name = "own.brute"

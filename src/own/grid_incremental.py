@@ -24,6 +24,7 @@ import numpy as np
 from .common import PairCollector, centre_extents, emit, radius_of
 from .grid import (CellLayout, cell_key, covered_cells, gather_centres, grid_layout, key_space, large_against_large,
                    small_limit)
+from .statics import StaticsApart
 
 # A frame with more objects changing cell than n / this rebuilds: past that, listing every
 # mover's neighbours costs more than enumerating the candidates afresh.
@@ -325,7 +326,7 @@ def new_state(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.empty((6, n), dtype=np.int64), np.empty((n, 2)), np.empty(n)
 
 
-class IncrementalGrid(CellLayout):
+class IncrementalGrid(StaticsApart, CellLayout):
     """own.grid's cells with candidate pairs kept between frames (see the module's docstring).
 
     `p` and `cell` as for own.grid; `specialise` (on by default) runs kernels without per-object

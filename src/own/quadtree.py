@@ -29,6 +29,7 @@ from .common import PairCollector, gather, insertion_sort, scan_columns
 from .morton import bit_length, interleave
 from .radix import radix_sort
 from .small import SmallScenes
+from .statics import StaticsApart
 
 # Keys are (Morton code of the cell, padded to depth D) << LEVEL_BITS | depth: 2 D + 5 bits.
 LEVEL_BITS = 5
@@ -213,7 +214,7 @@ def quadtree_pairs(order, box, nodes, bounds, buf):
     return count, tests, visited
 
 
-class Quadtree(SmallScenes, BroadPhase):
+class Quadtree(StaticsApart, SmallScenes, BroadPhase):
     """Region quadtree over the boxes, rebuilt every frame.
 
     A node splits when its subtree holds more than `capacity` objects, it is shallower than

@@ -12,6 +12,7 @@ from .common import PairCollector, emit, gather, insertion_sort
 from .parallel import ChunkedPairCollector
 from .radix import radix_argsort, sortable_bits
 from .small import SmallScenes
+from .statics import StaticsApart
 
 AXES = ("x", "y", "auto")
 SWEEPS = ("auto", "plain", "sparse")
@@ -248,7 +249,7 @@ def sap_sweep_parallel(order, s_lo, s_hi, o_lo, o_hi, bounds32, ramp, bufs):
     return counts, axis_hits, crowded
 
 
-class SweepAndPrune(SmallScenes, BroadPhase):
+class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
     """Sweep and prune; `axis` is "x" (the essay), "y" or "auto" (largest variance of the centres).
 
     Emits only pairs whose boxes overlap on both axes. Cost grows with the number of pairs that

@@ -12,9 +12,10 @@ from engines.base import BroadPhase
 from engines.registry import backend_class
 
 from .common import swept_circles
+from .statics import StaticsApart
 
 
-class _Swept(BroadPhase):
+class _Swept(StaticsApart, BroadPhase):
     exact = False
     inner = ""
 

@@ -23,6 +23,7 @@ from engines.knobs import Knob, fixed, mean_diameter, sizes
 
 from .common import PairCollector, emit
 from .grid import UniformGrid
+from .statics import StaticsApart
 
 PRECISIONS = ("float64", "float32")
 # The default skin adapts to the motion (an explicit `skin` stays as given): a list that lived one
@@ -57,7 +58,7 @@ def largest_step(positions, built):
     return step
 
 
-class VerletList(BroadPhase):
+class VerletList(StaticsApart, BroadPhase):
     """Verlet neighbour list over our exact grid; `skin` (default half a mean diameter), `every`
     (None: rebuild when an object has moved skin / 2, exact; k: every k frames, approximate),
     `precision` ("float64", or "float32": inputs rounded first, approximate), `fat` (True: the
@@ -96,7 +97,8 @@ class VerletList(BroadPhase):
         self._skin = float(self.params["skin"]) if self.params["skin"] is not None else default
         self._default_skin, self._adapts = self._skin, self.params["skin"] is None and self.params["every"] is None
         self._bare_rebuilds = 0  # rebuilds in a row at zero skin
-        self._grid = UniformGrid()
+        if not isinstance(getattr(self, "_grid", None), UniformGrid):
+            self._grid = UniformGrid()  # kept across resets, with its pair buffers (rain resets every frame)
         self._built_skin = None
         self._build(self._rounded(positions))
         self._frame = 0

@@ -1,0 +1,43 @@
+"""Statics apart, for our backends that take statics and spawning the interface's generic way.
+
+BroadPhase's "rebuild" lifecycle hands a backend the objects alive and drops the pairs of two
+statics after the search: the statics are still sorted, inserted and tested against each other
+every frame. `StaticsApart` leaves them out of the backend's structure, which holds the moving
+objects alive only, and keeps them in `StaticCells`, a grid built once (again only when a static
+appears or goes); each frame the movers are tested against it. Engines keep their own means: no
+engine's time includes this code.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .grid import StaticCells
+
+
+class StaticsApart:
+    """Mixin, first in the bases of a backend of ours whose lifecycle is "rebuild"."""
+
+    _static_cells: StaticCells | None = None
+
+    def _rebuild(self, positions: np.ndarray) -> None:
+        if self.static is None:
+            super()._rebuild(positions)
+            return
+        alive = self.alive if self.alive is not None else np.ones(self.objects, dtype=bool)
+        statics = np.flatnonzero(alive & self.static)
+        cells = self._static_cells
+        # Built anew at a reset (the scene may be another) or when the statics alive changed.
+        if not self._built or cells is None or not np.array_equal(cells.ids, statics):
+            self._static_cells = StaticCells(positions, self._all_radii, statics) if len(statics) else None
+        self._alive_ids = np.flatnonzero(alive & ~self.static)
+        self.radii, self.n = self._all_radii[self._alive_ids], len(self._alive_ids)
+        self._held_positions = np.ascontiguousarray(positions[self._alive_ids])
+        self._reset(self._held_positions, self.radii)
+
+    def pairs(self):
+        found = super().pairs()
+        if self._static_cells is None or self.static is None:
+            return found
+        cross, _ = self._static_cells.pairs_with(self._alive_ids, self._held_positions, self.radii, self.n)
+        return np.concatenate([found, cross])
