@@ -122,6 +122,7 @@ class BroadPhase(ABC):
     breaks: ClassVar[str] = ""
     limits: ClassVar[Limits] = NO_LIMITS
     lifecycle: ClassVar[Lifecycle] = "rebuild"
+    statics_held_apart: ClassVar[bool] = False  # "rebuild" without statics inside (own/statics.py)
 
     def __init__(self, **params: Any) -> None:
         unknown = sorted(set(params) - set(self.defaults))
@@ -207,7 +208,7 @@ class BroadPhase(ABC):
         if self._alive_ids is None:
             return found
         found = self._alive_ids[found]  # ids ascend, so i < j still holds
-        if self.static is not None:
+        if self.static is not None and not self.statics_held_apart:
             found = found[~(self.static[found[:, 0]] & self.static[found[:, 1]])]
         return found
 

@@ -19,6 +19,7 @@ class StaticsApart:
     """Mixin, first in the bases of a backend of ours whose lifecycle is "rebuild"."""
 
     _static_cells: StaticCells | None = None
+    statics_held_apart = True  # BroadPhase.pairs has no pairs of two statics to drop
 
     def _rebuild(self, positions: np.ndarray) -> None:
         if self.static is None:
