@@ -310,18 +310,21 @@ def against_statics(q_ids, q_centres, q_radii, q_end, s_objects, s_centres, s_ra
         for cy in range(cy0, cy1 + 1):
             s, e = s_start[cy * w + cx0 + 1], s_start[cy * w + cx1 + 2]
             tests += e - s
-            for b in range(s, e):
-                within = r + s_radii[b]
-                if abs(s_centres[b, 0] - x) <= within and abs(s_centres[b, 1] - y) <= within:
-                    emit(buf, count, i, s_objects[b])
-                    count += 1
+            count = _scan_statics(x, y, r, i, s, e, s_objects, s_centres, s_radii, buf, count)
         tests += end_large - first_large
-        for b in range(first_large, end_large):
-            within = r + s_radii[b]
-            if abs(s_centres[b, 0] - x) <= within and abs(s_centres[b, 1] - y) <= within:
-                emit(buf, count, i, s_objects[b])
-                count += 1
+        count = _scan_statics(x, y, r, i, first_large, end_large, s_objects, s_centres, s_radii, buf, count)
     return count, tests
+
+
+@nb.njit(cache=True, inline="always")
+def _scan_statics(x, y, r, i, s, e, s_objects, s_centres, s_radii, buf, count):
+    """Object i's box (centre x, y, radius r) against the static slots s..e-1; returns the count."""
+    for b in range(s, e):
+        within = r + s_radii[b]
+        if abs(s_centres[b, 0] - x) <= within and abs(s_centres[b, 1] - y) <= within:
+            emit(buf, count, i, s_objects[b])
+            count += 1
+    return count
 
 
 @nb.njit(cache=True)
