@@ -69,17 +69,17 @@ class Stepper:
         self.backend, self.traj = backend, traj
         if isinstance(backend, SmallScenes):  # drawing the structure is the point, however small the scene
             backend.small_scene_n = 0
-        self.backend.reset(traj.positions[0], traj.scene.radii)
+        self.backend.reset(traj.positions[0], traj.scene.radii, static=traj.scene.static, alive=traj.alive_at(0))
 
     def draw(self, fig, f: int, label: str) -> dict[str, int]:
         traj = self.traj
-        self.backend.update(traj.positions[f])
+        self.backend.update(traj.positions[f], traj.alive_at(f))
         candidates = self.backend.pairs()
         must = traj.box_pairs[f] if self.backend.reports == "boxes" else traj.contacts[f]
         structure = self.backend.structure()
         shown = "" if structure else " (structure not exposed by this backend)"
         counts = draw_frame(fig, traj.positions[f], traj.scene.radii, structure, candidates, traj.contacts[f],
-                            must, f"{label}{shown}, frame {f}")
+                            must, f"{label}{shown}, frame {f}", alive=traj.alive_at(f), static=traj.scene.static)
         fig.axes[0].set_title(fig.axes[0].get_title() + f"\n{counts['candidates']} candidates, "
                               f"{counts['overlaps']} true overlaps found, {counts['missed']} missed", fontsize=9)
         return counts
@@ -111,7 +111,7 @@ def draw(name: str, backend, params: dict, traj, args, folder) -> None:
         stepper = Stepper(backend, traj)
         fig = new_figure("intervals" in backend.structure())
         for f in range(1, args.frame + 1):  # bring a coherent backend to the frame the right way
-            backend.update(traj.positions[f])
+            backend.update(traj.positions[f], traj.alive_at(f))
         counts = stepper.draw(fig, args.frame, label)
         png = folder / f"{stem}.png"
         fig.savefig(png, dpi=100)

@@ -219,3 +219,14 @@ def test_scale_takes_a_recorded_family(tmp_path):
                        "--out", str(out)]) == 0
     rows = pd.read_csv(out / "results.csv")
     assert set(rows.dist) == {"uniform", "pile"} and set(rows.n) == {64, 128, 256}
+
+
+def test_show_draws_only_the_objects_alive(tmp_path, capsys):
+    from studies import show
+
+    assert show.main(["--backends", "own.grid", "--dist", "rain", "--n", "300", "--frame", "2",
+                      "--out", str(tmp_path / "show")]) == 0
+    printed = capsys.readouterr().out
+    traj = simulate(generate("rain", 300), 3)
+    assert f"{int(traj.alive[2].sum())} circles" in printed and "0 missed" in printed
+    assert (tmp_path / "show" / "own_grid.png").stat().st_size > 5000

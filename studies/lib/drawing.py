@@ -58,8 +58,10 @@ def interval_rows(intervals: np.ndarray) -> np.ndarray:
 
 
 def draw_frame(fig, positions: np.ndarray, radii: np.ndarray, structure: dict, candidates: np.ndarray,
-               overlaps: np.ndarray, must_find: np.ndarray, title: str) -> dict[str, int]:
-    """Draw into `fig` (cleared); returns how many elements each layer holds.
+               overlaps: np.ndarray, must_find: np.ndarray, title: str, alive: np.ndarray | None = None,
+               static: np.ndarray | None = None) -> dict[str, int]:
+    """Draw into `fig` (cleared); returns how many elements each layer holds. Only the objects
+    `alive` are drawn (all where None), the `static` ones in grey.
 
     `overlaps`: pairs of truly overlapping circles (highlighted where found); `must_find`: the
     pairs the backend promises (box overlaps or contacts); those absent from `candidates` are
@@ -78,12 +80,15 @@ def draw_frame(fig, positions: np.ndarray, radii: np.ndarray, structure: dict, c
     else:
         ax, strip = fig.subplots(1, 1), None
     n = len(radii)
-    circles = EllipseCollection(2 * radii, 2 * radii, np.zeros(n), units="xy", offsets=positions,
-                                offset_transform=ax.transData, facecolors="none", edgecolors="tab:blue",
-                                linewidths=0.6, zorder=2)
+    shown = np.ones(n, dtype=bool) if alive is None else alive
+    fixed = np.zeros(n, dtype=bool) if static is None else static
+    colours = np.where(fixed[shown], "0.55", "tab:blue")
+    circles = EllipseCollection(2 * radii[shown], 2 * radii[shown], np.zeros(int(shown.sum())), units="xy",
+                                offsets=positions[shown], offset_transform=ax.transData, facecolors="none",
+                                edgecolors=colours, linewidths=0.6, zorder=2)
     circles.set_gid("circles")
     ax.add_collection(circles)
-    counts = {"circles": n}
+    counts = {"circles": int(shown.sum())}
     for layer in ("cells", "nodes"):
         if layer in structure:
             _add(ax, layer, _rect_outlines(structure[layer]), 1)
@@ -94,9 +99,9 @@ def draw_frame(fig, positions: np.ndarray, radii: np.ndarray, structure: dict, c
     _add(ax, "overlaps", _segments(positions, overlaps[found]), 4)
     _add(ax, "missed", _segments(positions, missed), 5)
     counts.update(candidates=len(candidates), overlaps=int(found.sum()), missed=len(missed))
-    if n:
-        lo = (positions - radii[:, None]).min(axis=0)
-        hi = (positions + radii[:, None]).max(axis=0)
+    if shown.any():
+        lo = (positions[shown] - radii[shown, None]).min(axis=0)
+        hi = (positions[shown] + radii[shown, None]).max(axis=0)
         # Centre and half-span, computed in halves and capped below half the largest double, so
         # that the span stays a number (matplotlib needs one) even for a scene near that extreme.
         centre = 0.5 * lo + 0.5 * hi
