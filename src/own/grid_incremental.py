@@ -27,8 +27,11 @@ from .grid import (CellLayout, cell_key, covered_cells, gather_centres, grid_lay
 from .statics import StaticsApart
 
 # A frame with more objects changing cell than n / this rebuilds: past that, listing every
-# mover's neighbours costs more than enumerating the candidates afresh.
-REBUILD_MOVERS_DIVISOR = 8
+# mover's neighbours and dropping their old candidates (a pass over all of them) costs more than
+# enumerating the candidates afresh. Once rebuilds listed candidates from ranges (0.49 to 0.056 ms
+# at n = 4096), 32 measured best: the settling pile at n = 65536 (5% movers a frame) 5.4 ms a frame
+# at 8, 3.4 at 32 or 64; the essay's scene, the tumbler and clustered scenes the same or faster.
+REBUILD_MOVERS_DIVISOR = 32
 # The ranks are renumbered in cell order (a rebuild) once this many times n objects have changed
 # cell since the last rebuild, so that candidate tests keep reading memory almost in order.
 RENEW_AFTER_MOVES_PER_OBJECT = 1
@@ -332,8 +335,8 @@ class IncrementalGrid(StaticsApart, CellLayout):
     `p` and `cell` as for own.grid; `specialise` (on by default) runs kernels without per-object
     radius reads where every radius is equal (off: the general kernels, to measure the saving).
     Fast while few objects change cell per frame; a frame where many do (fast movers, a teleport)
-    rebuilds, at 2-2.5x the cost of an own.grid frame (every object jumping: 0.24 against 0.095
-    ms at n = 2048, 24 against 12 ms at n = 131072).
+    rebuilds, at 1.1-1.3x the cost of an own.grid frame (every object jumping: 0.033 against 0.029
+    ms at n = 2048, 3.9 against 3.1 ms at n = 131072).
     """
 
     name = "own.grid_incremental"
