@@ -87,7 +87,7 @@ class FamilyMotion:
                 with np.load(path) as data:
                     alive = data["alive"] if "alive" in data.files else None
                     return Recording(data["positions"][:frames], None if alive is None else alive[:frames],
-                                     f"pymunk {self.family}").record(frames)
+                                     f"pymunk {self.family}")
             except (OSError, ValueError, KeyError):
                 path.unlink(missing_ok=True)  # a torn file: record again
         return self._simulate(max(frames, FIRST_FRAMES)).record(frames)
@@ -100,7 +100,8 @@ class FamilyMotion:
         fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.stem}.", suffix=".npz")
         os.close(fd)
         try:
-            np.savez(tmp, **{k: v for k, v in fields.items() if v is not None})
+            # The motion only: radii, box and statics come from _layout, which draws them the same.
+            np.savez(tmp, **{k: fields[k] for k in ("positions", "alive") if fields.get(k) is not None})
             os.replace(tmp, path)
         finally:
             Path(tmp).unlink(missing_ok=True)
@@ -122,10 +123,9 @@ def family_scene(family: str, n: int, seed: int = 0, radii: tuple[float, float] 
         raise ValueError(f"radii bounds must satisfy 0 < min <= max, got {radii!r}")
     motion = FamilyMotion(family, int(n), int(seed), (lo, hi))
     record = motion.record(FIRST_FRAMES)
-    static = _static_of(family, int(n))
     fields = _layout(family, int(n), np.random.default_rng(seed), (lo, hi))
     return Scene(record.positions[0], fields["radii"], np.zeros((int(n), 2)), box=check_box(fields["box"]),
-                 name=f"{family}-n{n}-r{lo:g}-{hi:g}-s{seed}", walls=False, responds=False, static=static,
+                 name=f"{family}-n{n}-r{lo:g}-{hi:g}-s{seed}", walls=False, responds=False, static=fields["static"],
                  motion=motion, meta={"dist": family, "seed": seed, "speed": ""})
 
 
