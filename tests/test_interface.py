@@ -43,6 +43,7 @@ def test_unknown_parameter_is_a_clear_error():
         ("own.bvh", {"leaf_size": 0}, "leaf_size must be an integer >= 1"),
         ("own.sap", {"axis": "z"}, "axis must be one of"),
         ("own.sap", {"sweep": "fast"}, "sweep must be one of auto, plain, sparse, got 'fast'"),
+        ("own.sap", {"strips": "yes"}, "strips must be one of auto, on, off, got 'yes'"),
         ("own.sap_parallel", {"parallel_from": -1}, "parallel_from must be an integer >= 0"),
         ("own.grid_parallel", {"parallel_from": 1.5}, "parallel_from must be an integer >= 0"),
         ("essay.quadtree", {"capacity": "5"}, "capacity must be an integer"),

@@ -26,11 +26,15 @@ EXACT = [
     ("own.sap", {"axis": "auto"}),
     ("own.sap_incremental", {}),
     ("own.sap", {"axis": "x", "incremental": True}),
-    ("own.sap", {"sweep": "plain"}),
-    ("own.sap", {"sweep": "sparse"}),
-    ("own.sap", {"axis": "x", "incremental": True, "sweep": "sparse"}),
+    ("own.sap", {"sweep": "plain", "strips": "off"}),
+    ("own.sap", {"sweep": "sparse", "strips": "off"}),
+    ("own.sap", {"axis": "x", "incremental": True, "sweep": "sparse", "strips": "off"}),
+    ("own.sap", {"strips": "on"}),  # in strips wherever they can be used, however sparse the scene
+    ("own.sap", {"axis": "y", "strips": "on"}),
+    ("own.sap", {"axis": "x", "incremental": True, "strips": "on"}),
     ("own.sap_parallel", {"parallel_from": 0}),  # every sweep parallel, however small
-    ("own.sap_parallel", {"parallel_from": 0, "sweep": "sparse"}),
+    ("own.sap_parallel", {"parallel_from": 0, "sweep": "sparse", "strips": "off"}),
+    ("own.sap_parallel", {"parallel_from": 0, "strips": "on"}),
     ("own.sap", {"axis": "y", "parallel": True, "parallel_from": 0}),
     ("own.grid", {}),
     ("own.grid", {"p": 1}),
@@ -227,7 +231,7 @@ def test_sap_picks_its_sweep_from_last_frames_pairs_per_object(dist, sweep):
     # The essay's scenes: 0.4 pairs per object when uniform, 3.6 when clustered.
     traj = simulate(generate(dist, 2048, seed=1), frames=3)
     n = traj.scene.n
-    sap = engines.create("own.sap")
+    sap = engines.create("own.sap", strips="off")
     sap.reset(traj.positions[0], traj.scene.radii)
     assert sap.stats()["sparse_sweep"] == 0  # no pairs counted yet
     sap.pairs()
@@ -237,12 +241,59 @@ def test_sap_picks_its_sweep_from_last_frames_pairs_per_object(dist, sweep):
         np.testing.assert_array_equal(np.sort(keys(sap.pairs(), n)), keys(traj.box_pairs[f], n))
 
 
+@pytest.mark.parametrize("incremental", [False, True])
+def test_sap_sweeps_in_strips_where_the_scene_is_dense_and_plain_where_it_is_sparse(incremental):
+    # The essay's density at n = 2048: the plain sweep would test about 20 pairs per object.
+    dense = simulate(generate("uniform", 2048, seed=1), frames=4)
+    sparse = generate("uniform", 300, radius=1.0, seed=1)  # 0.3 pairs per object on the sweep axis
+    n = dense.scene.n
+    sap = engines.create("own.sap", incremental=incremental)
+    sap.reset(dense.positions[0], dense.scene.radii)
+    assert sap.stats()["strips"] > 2
+    for f in range(1, dense.frames):
+        sap.update(dense.positions[f])
+        sap.validate()
+        assert (sap.stats()["swaps"] >= 0) == incremental  # the strips' repair keeps their order
+        np.testing.assert_array_equal(np.sort(keys(sap.pairs(), n)), keys(dense.box_pairs[f], n))
+        assert sap.stats()["axis_overlaps"] < 4 * len(dense.box_pairs[f])  # tests near the pairs, not ~20 n
+    sap.reset(sparse.positions, sparse.radii)
+    assert sap.stats()["strips"] == 0
+
+
+def test_sap_strips_give_up_on_a_box_that_spans_more_than_two_strips():
+    # Strips half as tall as the boxes: the kernel says so rather than sweep a strip order that
+    # could pair objects three strips apart.
+    from own.strips import strip_plan, strip_prepare
+
+    scene = generate("uniform", 500, seed=6)
+    n = scene.n
+    axis, base, inv_height, strips, s0, s1 = strip_plan(scene.positions, scene.radii, 0, True, -1)
+    assert strips > 2
+    plan = (axis, base, 2.0 * inv_height, min(2 * strips, n), s0, s1)
+    work = (np.empty((n, 2)), np.empty(n), np.empty(n), np.empty(n, dtype=np.int64))
+    args = (np.full(n + 1, -1), False, np.empty(n + 1, dtype=np.int64), work, tuple(np.empty(n) for _ in range(4)),
+            np.zeros(plan[3] + 1, dtype=np.int64), np.empty(plan[3]), np.empty(n, dtype=np.int64))
+    assert strip_prepare(scene.positions, scene.radii, plan, *args) == -2
+
+
+def test_sap_strips_repair_gives_up_and_sorts_afresh_when_everything_jumps():
+    scene = generate("uniform", 2048, seed=2)
+    rng = np.random.default_rng(3)
+    sap = engines.create("own.sap_incremental", strips="on")
+    sap.reset(scene.positions, scene.radii)
+    for positions, repaired in ((scene.positions + 0.01, True), (rng.permutation(scene.positions), False)):
+        sap.update(positions)
+        assert (sap.stats()["swaps"] >= 0) == repaired
+        sap.validate()
+        assert set(map(tuple, sap.pairs().tolist())) == set(map(tuple, brute_pairs(positions, scene.radii).tolist()))
+
+
 def test_sap_sweeps_plain_once_float32_cannot_tell_the_objects_apart():
     # The essay scene 1e12 from the origin: float32 steps there are 65536 wide, so every object of
     # a window looks like a hit to the sparse sweep.
     traj = simulate(STRESS_SCENES["shift_1e12"](), frames=4)
     n = traj.scene.n
-    sap = engines.create("own.sap")
+    sap = engines.create("own.sap", strips="off")
     sap.reset(traj.positions[0], traj.scene.radii)
     sap.pairs()
     used = []

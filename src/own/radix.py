@@ -43,7 +43,14 @@ def radix_sort(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     order = np.arange(n, dtype=np.int64)
     if n < 2:
         return order, keys.copy()
-    passes = (64 + DIGIT_BITS - 1) // DIGIT_BITS
+    # Only the digits below the highest bit set in any key: the counting loop's work per key is
+    # one increment per pass, and Morton codes of 32 bits or short quantised keys need half of 8.
+    used = np.uint64(0)
+    for i in range(n):
+        used |= keys[i]
+    passes = 1
+    while passes < (64 + DIGIT_BITS - 1) // DIGIT_BITS and used >> np.uint64(passes * DIGIT_BITS):
+        passes += 1
     mask = np.uint64(BUCKETS - 1)
     count = np.zeros((passes, BUCKETS), dtype=np.int64)
     for i in range(n):

@@ -13,9 +13,11 @@ from .parallel import ChunkedPairCollector
 from .radix import radix_argsort, sortable_bits
 from .small import SmallScenes
 from .statics import StaticsApart
+from .strips import strip_plan, strip_prepare, strip_sweep, strip_sweep_parallel
 
 AXES = ("x", "y", "auto")
 SWEEPS = ("auto", "plain", "sparse")
+STRIPS = ("auto", "on", "off")
 # An insertion-sort repair that needs more swaps than this many per object gives up and sorts
 # from scratch: coherence only pays while objects move little between frames.
 MAX_SWAPS_PER_OBJECT = 8
@@ -259,19 +261,23 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
     (sap_sweep), "sparse" (sap_sweep_sparse) or "auto": sparse while last frame found at most
     SPARSE_PAIRS_PER_OBJECT pairs per object, and float32 told the objects apart so far.
     `parallel` sweeps on every core once last frame's sweep had `parallel_from` sweep-axis
-    overlaps (the sort stays single-threaded).
+    overlaps (the sort stays single-threaded). `strips` "on" sweeps the scene in strips along the
+    other axis (own/strips.py), "auto" where that at least halves the estimated sweep-axis
+    overlaps: on a dense scene the plain sweep tests O(sqrt(n)) pairs per object, the strips a few.
+    A strip sweep's "auto" axis is the one along which the boxes extend further.
     """
 
     name = "own.sap"
     method = "sweep"
     sweeps = (Knob("axis", fixed(["x", "y", "auto"]), "sweep axis"),
-              Knob("sweep", fixed(["plain", "sparse", "auto"]), "sweep"))
-    defaults = {"axis": "auto", "incremental": False, "sweep": "auto", "parallel": False,
+              Knob("sweep", fixed(["plain", "sparse", "auto"]), "sweep"),
+              Knob("strips", fixed(["on", "off", "auto"]), "strips"))
+    defaults = {"axis": "auto", "incremental": False, "sweep": "auto", "strips": "auto", "parallel": False,
                 "parallel_from": PARALLEL_FROM_OVERLAPS}
 
     def __init__(self, **params):
         super().__init__(**params)
-        for key, allowed in (("axis", AXES), ("sweep", SWEEPS)):
+        for key, allowed in (("axis", AXES), ("sweep", SWEEPS), ("strips", STRIPS)):
             if self.params[key] not in allowed:
                 raise ValueError(f"{self.name}: {key} must be one of {', '.join(allowed)}, got {self.params[key]!r}")
         self._axis_mode = AXES.index(self.params["axis"])
@@ -289,6 +295,10 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         self._order, self._spare_order = np.full(n + 1, -1, dtype=np.int64), np.empty(n + 1, dtype=np.int64)
         self._work = (np.empty((n, 2)), np.empty(n), np.empty(n), np.empty(n, dtype=np.int64))
         self._sorted = tuple(np.empty(n) for _ in range(4))
+        # The strip sweep's first slot and widest box of each strip, and each object's strip.
+        self._strip_start, self._strip_width = np.zeros(n + 1, dtype=np.int64), np.empty(n)
+        self._strip_of = np.empty(n, dtype=np.int64)
+        self._strips = 0  # strips swept this frame; 0: a plain sweep
         # The sparse sweep's float32 bounds, filled only in frames that use it (an empty pair of
         # rows in the others), and the window positions it sums; none where it can never run.
         sparse_n = n if self.params["sweep"] != "plain" and n <= MAX_SPARSE_N else 0
@@ -304,6 +314,9 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         if self._collect_chunks is not None:
             self._collect_chunks(sap_sweep_parallel, no_order, nothing, nothing, nothing, nothing,
                                  self._no_bounds32, self._ramp)
+            if self.params["strips"] != "off":
+                self._collect_chunks(strip_sweep_parallel, no_order, nothing, nothing, nothing, nothing,
+                                     np.zeros(1, dtype=np.int64), nothing)
         self._update(positions)
 
     def _sparse_sweep(self) -> bool:
@@ -317,14 +330,48 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
                 and not self._float32_too_coarse)
 
     def _update(self, positions):
+        if self.params["strips"] != "off" and self._strip_update(positions):
+            return
+        self._strips = 0
         self._sparse = self._sparse_sweep()
         axis, swaps = sap_prepare(positions, self.radii, self._axis_mode, self._order, self._incremental,
                                   self._spare_order, self._work, self._sorted,
                                   self._bounds32 if self._sparse else self._no_bounds32)
         self._order, self._spare_order = self._spare_order, self._order
-        self._stats = {"axis": axis, "swaps": swaps, "sparse_sweep": int(self._sparse), "crowded_windows": 0}
+        self._stats = {"axis": axis, "swaps": swaps, "sparse_sweep": int(self._sparse), "crowded_windows": 0,
+                       "strips": 0}
+
+    def _strip_update(self, positions) -> bool:
+        """Sort for a strip sweep, where strips pay (or are asked for) and hold; False: sweep plain."""
+        last = self._order[self.n]  # axis + 2 after a strip sweep
+        plan = strip_plan(positions, self.radii, self._axis_mode, self.params["strips"] == "on", last - 2 if last >= 2 else -1)
+        axis, strips = plan[0], plan[3]
+        if not strips:
+            return False
+        swaps = strip_prepare(positions, self.radii, plan, self._order, self._incremental, self._spare_order,
+                              self._work, self._sorted, self._strip_start[:strips + 1], self._strip_width[:strips],
+                              self._strip_of)
+        if swaps == -2:
+            return False
+        self._order, self._spare_order = self._spare_order, self._order
+        self._strips, self._sparse = strips, False
+        self._stats = {"axis": axis, "swaps": swaps, "sparse_sweep": 0, "crowded_windows": 0, "strips": strips}
+        return True
+
+    def _strip_pairs(self):
+        args = (self._order[:self.n], *self._sorted, self._strip_start[:self._strips + 1],
+                self._strip_width[:self._strips])
+        if self._collect_chunks is not None and self._last_overlaps >= self._parallel_from:
+            out, (tested,) = self._collect_chunks(strip_sweep_parallel, *args)
+        else:
+            out, (tested,) = self._collect(strip_sweep, *args, 0, self.n)
+        self._stats["axis_overlaps"] = self._last_overlaps = tested
+        self._last_pairs = len(out)
+        return out
 
     def _pairs(self):
+        if self._strips:
+            return self._strip_pairs()
         order, bounds32 = self._order[:self.n], self._bounds32 if self._sparse else self._no_bounds32
         crowded = 0
         if self._collect_chunks is not None and self._last_overlaps >= self._parallel_from:
@@ -351,7 +398,10 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
     def validate(self):
         order, s_lo = self._order[:self.n], self._sorted[0]
         assert np.array_equal(np.sort(order), np.arange(self.n)), "sort order is not a permutation"
-        assert (np.diff(s_lo) >= 0).all(), "lower bounds are not sorted"
+        starts = self._strip_start[:self._strips + 1] if self._strips else np.array([0, self.n])
+        assert starts[0] == 0 and starts[-1] == self.n and (np.diff(starts) >= 0).all(), "strips do not tile the order"
+        for s, e in zip(starts[:-1], starts[1:]):
+            assert (np.diff(s_lo[s:e]) >= 0).all(), "lower bounds are not sorted" + (" within a strip" if self._strips else "")
 
 
 class IncrementalSweepAndPrune(SweepAndPrune):

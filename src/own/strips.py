@@ -1,0 +1,263 @@
+"""Sweep and prune in strips: the plain sweep's cost, made local where a scene is dense.
+
+A sweep along one axis tests every pair that overlaps on that axis alone: about
+n * (mean width) / (extent) per object, which grows as sqrt(n) on a square scene at fixed density
+(229 per object at n = 65536 at the essay's density, a few hundred more in a settled pile). Here
+the other axis is cut into strips at least as tall as the tallest box, and each strip is swept
+on its own (as PhysX's multi-box pruning sweeps each of its regions): the objects are sorted by
+(strip of their lower bound, lower bound on the sweep axis). Two boxes that overlap lie in one
+strip or in two adjacent ones, so each object is swept against the later objects of its strip
+and, through a cursor that only moves forward, against the objects of the next strip that
+overlap it on the sweep axis. Each pair is found once, from the object in the lower strip.
+
+Exact, like the plain sweep: the strip of a value is floor((v - base) / height), monotone in v,
+and a frame whose boxes each span at most two strips is checked, not assumed (`strip_prepare`
+declines otherwise, and the caller sweeps plain).
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from .common import emit, gather
+
+# Strips pay once the plain sweep would test at least this many pairs per object, and the strips
+# cut that at least in half (estimated from the extents and radii).
+STRIPS_FROM_WINDOW = 4
+# The "auto" axis changes only when the other extent is this much longer.
+AXIS_STAYS = 1.25
+# A repair of last frame's order gives up past this many swaps per object.
+MAX_SWAPS_PER_OBJECT = 8
+
+# Pads each strip's widest box for the next strip's cursor, so that the float sum s_lo + width
+# cannot round below the box's upper bound (a correctly rounded difference errs by 2^-53 of itself).
+WIDTH_PAD = 1.0 + 1e-12
+
+
+@nb.njit(cache=True)
+def strip_plan(positions, radii, axis_mode, always, last_axis):
+    """(axis, base, 1 / height, strips, s0, s1): the sweep axis (`axis_mode` 0 x, 1 y, 2 the
+    longer extent, where `last_axis` stays unless the other extent is AXIS_STAYS longer: a square
+    scene would otherwise flip between frames, and each flip costs a sort from scratch), strips
+    along the other one, and the boxes' extent on the sweep axis; strips =
+    0 where strips would not pay (unless `always`) or cannot be used (no extent, zero or
+    non-finite sizes, more strips than objects)."""
+    n = positions.shape[0]
+    x0, x1, y0, y1 = np.inf, -np.inf, np.inf, -np.inf
+    widest = total = 0.0
+    for i in range(n):
+        r = radii[i]
+        x0, x1 = min(x0, positions[i, 0] - r), max(x1, positions[i, 0] + r)
+        y0, y1 = min(y0, positions[i, 1] - r), max(y1, positions[i, 1] + r)
+        widest = max(widest, r)
+        total += r
+    axis = axis_mode
+    if axis_mode == 2:
+        axis = int(y1 - y0 > x1 - x0)
+        longer, shorter = max(x1 - x0, y1 - y0), min(x1 - x0, y1 - y0)
+        if last_axis >= 0 and axis != last_axis and longer <= AXIS_STAYS * shorter:
+            axis = last_axis
+    (s0, s1), (o0, o1) = ((x0, x1), (y0, y1)) if axis == 0 else ((y0, y1), (x0, x1))
+    height = 2.0 * widest * WIDTH_PAD
+    s_extent, o_extent = s1 - s0, o1 - o0
+    none = (axis, 0.0, 0.0, 0, s0, s1)
+    if n < 2 or not (height > 0 and np.isfinite(height) and np.isfinite(s_extent) and np.isfinite(o_extent)
+                     and s_extent > 0):
+        return none
+    strips = int(o_extent / height) + 2  # one spare: the base is rounded down to a whole strip
+    if strips < 3 or strips > n:
+        return none
+    window = n * (2.0 * total / n) / s_extent  # the plain sweep's pairs per object
+    # Per object: its strip's window and the next strip's, which reaches a widest box further back.
+    strip_window = window * (height / o_extent) * (2.0 + widest * n / total)
+    if not always and (window < STRIPS_FROM_WINDOW or strip_window > 0.5 * window):
+        return none
+    # The base on a multiple of the height, so that strips stay put while the scene's lowest box
+    # moves (it does every frame where objects are spawned and removed): last frame's order stays
+    # a good start for the repair.
+    base = (np.floor(o0 / height) - 1.0) * height
+    if not (base <= o0):
+        base = o0
+    return axis, base, 1.0 / height, strips, s0, s1
+
+
+@nb.njit(cache=True, inline="always")
+def _strip(v, base, inv_height, last):
+    return min(int((v - base) * inv_height), last)
+
+
+@nb.njit(cache=True)
+def strip_prepare(positions, radii, plan, last_order, incremental, order, work, sorted_bounds,
+                  strip_start, strip_width, strip_of):
+    """Sort for this frame's strip sweep into `order`, `sorted_bounds` (s_lo, s_hi, o_lo, o_hi),
+    `strip_start` (first slot of each strip, then n) and `strip_width` (each strip's widest box on
+    the sweep axis, padded); `strip_of` (n) is scratch. Returns the swaps of the repair, -1 after a
+    full sort, or -2 when a box spans more than two strips (nothing usable: the caller sweeps plain).
+
+    With `incremental`, last frame's strip order (`last_order`, its axis + 2 in its last entry) is
+    repaired by an insertion sort on (strip, lower bound), which costs O(n) while few objects change
+    strip or pass each other; otherwise, and when the repair gives up, the objects are radix-sorted
+    by lower bound and then grouped by strip with a stable counting sort.
+    """
+    n = positions.shape[0]
+    axis, base, inv_height, strips, s0, s1 = plan
+    other = 1 - axis
+    last = strips - 1
+    xy, sr, keys, perm = work
+    swaps = -1
+    if incremental and last_order[n] == axis + 2:
+        gather(positions, radii, last_order[:n], xy, sr)
+        if not _slot_strips(xy, sr, axis, base, inv_height, last, strip_of, keys, perm):
+            return -2
+        swaps = _repair(strip_of, keys, perm, MAX_SWAPS_PER_OBJECT * n + 64)
+        if swaps >= 0:
+            for a in range(n):
+                order[a] = last_order[perm[a]]
+    if swaps < 0:
+        # Sorted on (strip, lower bound quantised) by a counting sort, on about one bucket per
+        # object (at most one per strip height along the sweep axis). The quantising is monotone,
+        # so only objects sharing a bucket can be out of order, and the insertion sort below puts
+        # them right, exactly.
+        cols = max(1, min(int((s1 - s0) * inv_height) + 1, n // strips))
+        scale, top = cols / (s1 - s0), float(cols - 1)
+        quant = perm.view(np.uint64)  # borrowed: the sort keys
+        for i in range(n):
+            r = radii[i]
+            k = _strip(positions[i, other] - r, base, inv_height, last)
+            q = min((positions[i, axis] - r - s0) * scale, top)
+            quant[i] = np.uint64(k) * np.uint64(cols) + np.uint64(q)
+        source = counting_argsort(quant, strips * cols)
+        gather(positions, radii, source, xy, sr)
+        if not _slot_strips(xy, sr, axis, base, inv_height, last, strip_of, keys, perm):
+            return -2
+        _repair(strip_of, keys, perm, n * n + 64)
+        for a in range(n):
+            order[a] = source[perm[a]]
+    s_lo, s_hi, o_lo, o_hi = sorted_bounds
+    strip_width[:] = 0.0
+    k_last, widest = -1, 0.0  # the strip of the slots before, and its widest box so far
+    for a in range(n):  # perm is almost the identity: near-sequential reads
+        j = perm[a]
+        r = sr[j]
+        s_lo[a], s_hi[a] = xy[j, axis] - r, xy[j, axis] + r
+        o_lo[a], o_hi[a] = xy[j, other] - r, xy[j, other] + r
+        k = strip_of[a]
+        if k != k_last:  # slots come strip by strip: a branch taken once per strip
+            if k_last >= 0:
+                strip_width[k_last] = widest * WIDTH_PAD
+            strip_start[k_last + 1:k + 1] = a
+            k_last, widest = k, 0.0
+        widest = max(widest, s_hi[a] - s_lo[a])
+    if k_last >= 0:
+        strip_width[k_last] = widest * WIDTH_PAD
+    strip_start[k_last + 1:] = n
+    order[n] = axis + 2  # a strip order, on this axis
+    return swaps
+
+
+@nb.njit(cache=True)
+def counting_argsort(keys, buckets):
+    """Stable argsort of integer keys below `buckets`."""
+    start = np.zeros(buckets + 1, dtype=np.int64)
+    for i in range(keys.shape[0]):
+        start[keys[i] + 1] += 1
+    for b in range(buckets):
+        start[b + 1] += start[b]
+    order = np.empty(keys.shape[0], dtype=np.int64)
+    for i in range(keys.shape[0]):
+        b = keys[i]
+        order[start[b]] = i
+        start[b] += 1
+    return order
+
+
+@nb.njit(cache=True)
+def _slot_strips(xy, sr, axis, base, inv_height, last, strip_of, keys, perm):
+    """Each row's strip into strip_of, its lower bound on the sweep axis into keys, and perm the
+    identity; False if a box spans more than two strips."""
+    other = 1 - axis
+    spans = 0
+    for a in range(xy.shape[0]):
+        r = sr[a]
+        k = _strip(xy[a, other] - r, base, inv_height, last)
+        spans = max(spans, _strip(xy[a, other] + r, base, inv_height, last) - k)
+        strip_of[a] = k
+        keys[a] = xy[a, axis] - r
+        perm[a] = a
+    return spans <= 1
+
+
+@nb.njit(cache=True)
+def _repair(strips, keys, perm, max_swaps):
+    """Insertion sort of the rows by (strip, key), all three permuted together; the swaps made, or
+    -1 once past max_swaps (the rows then part-sorted)."""
+    swaps = 0
+    for a in range(1, keys.shape[0]):
+        k, key, p = strips[a], keys[a], perm[a]
+        b = a - 1
+        while b >= 0 and (strips[b] > k or (strips[b] == k and keys[b] > key)):
+            strips[b + 1], keys[b + 1], perm[b + 1] = strips[b], keys[b], perm[b]
+            b -= 1
+            swaps += 1
+        if swaps > max_swaps:
+            return -1
+        strips[b + 1], keys[b + 1], perm[b + 1] = k, key, p
+    return swaps
+
+
+@nb.njit(cache=True)
+def strip_sweep(order, s_lo, s_hi, o_lo, o_hi, strip_start, strip_width, a0, a1, buf):
+    """Box-overlap pairs of the objects in sorted slots a0..a1-1 with the later ones of their strip
+    and the overlapping ones of the next strip, into buf; returns (pairs found, pairs tested).
+
+    Windows hold a few objects (that is what the strips are for): plain loops, each candidate
+    written at row `count` and kept only by a hit, with no branch on the test."""
+    strips = strip_start.shape[0] - 1
+    count = tested = 0
+    lo, hi = 0, strips - 1  # the strip of slot a0: the last one starting at or before it
+    while lo < hi:
+        mid = (lo + hi + 1) >> 1
+        if strip_start[mid] <= a0:
+            lo = mid
+        else:
+            hi = mid - 1
+    k = lo
+    own_end = strip_start[k + 1]
+    next_end = strip_start[k + 2] if k + 1 < strips else own_end
+    reach = strip_width[k + 1] if k + 1 < strips else 0.0
+    cursor = own_end  # in strip k + 1: no slot before it can overlap what is left of strip k
+    for a in range(a0, a1):
+        while own_end <= a:
+            k += 1
+            own_end = cursor = strip_start[k + 1]
+            next_end = strip_start[k + 2] if k + 1 < strips else own_end
+            reach = strip_width[k + 1] if k + 1 < strips else 0.0
+        top, bottom, lo_a, hi_a, i = s_hi[a], s_lo[a], o_lo[a], o_hi[a], order[a]
+        b = a + 1
+        while b < own_end and s_lo[b] <= top:
+            emit(buf, count, i, order[b])
+            count += (o_lo[b] <= hi_a) & (o_hi[b] >= lo_a)
+            b += 1
+        tested += b - a - 1
+        while cursor < next_end and s_lo[cursor] + reach < bottom:
+            cursor += 1
+        b = cursor
+        while b < next_end and s_lo[b] <= top:
+            emit(buf, count, i, order[b])
+            count += (o_lo[b] <= hi_a) & (o_hi[b] >= lo_a) & (s_hi[b] >= bottom)
+            b += 1
+        tested += b - cursor
+    return count, tested
+
+
+@nb.njit(cache=True, parallel=True)
+def strip_sweep_parallel(order, s_lo, s_hi, o_lo, o_hi, strip_start, strip_width, bufs):
+    """strip_sweep with the sorted slots split into one chunk per row of bufs, swept in parallel;
+    returns (pairs per chunk, pairs tested per chunk)."""
+    chunks, n = bufs.shape[0], s_lo.shape[0]
+    counts, tested = np.zeros((2, chunks), dtype=np.int64)
+    for c in nb.prange(chunks):
+        counts[c], tested[c] = strip_sweep(order, s_lo, s_hi, o_lo, o_hi, strip_start, strip_width,
+                                           c * n // chunks, (c + 1) * n // chunks, bufs[c])
+    return counts, tested
