@@ -572,3 +572,26 @@ def test_verlet_default_skin_shrinks_where_lists_live_a_frame_and_stays_where_th
     for frame in fast.positions[1:]:
         fixed.update(frame)
     assert fixed._skin == 10.0  # a skin given is kept
+
+
+def test_quadtree_keeps_its_lattice_while_the_boxes_stay_inside_and_retries_a_failed_repair_later():
+    from own.quadtree import RETRY_REPAIR
+
+    scene = generate("uniform", 2000, seed=9)
+    rng = np.random.default_rng(9)
+    tree = engines.create("own.quadtree")
+    tree.reset(scene.positions, scene.radii)
+    square = tree._lattice.copy()
+    tree.update(scene.positions + 0.01)  # inside the slack: same lattice, a cheap repair
+    assert np.array_equal(tree._lattice, square) and tree.stats()["swaps"] >= 0
+    shuffled = [rng.permutation(scene.positions) for _ in range(RETRY_REPAIR + 2)]
+    tried = []
+    for positions in shuffled:  # every frame jumps: the repair gives up, then waits
+        tree.update(positions)
+        tried.append(tree.stats()["swaps"])
+        tree.validate()
+        assert set(map(tuple, tree.pairs().tolist())) == set(map(tuple, brute_pairs(positions, scene.radii).tolist()))
+    assert all(s == -1 for s in tried)
+    assert tree._waited == 0  # tried again after RETRY_REPAIR frames (and gave up again)
+    tree.update(scene.positions * 0.5)  # the boxes span less than half the square: fitted afresh
+    assert tree._lattice[2] < square[2]

@@ -38,6 +38,9 @@ LEVEL_MASK = (1 << LEVEL_BITS) - 1
 # object that changes depth jumps a whole subtree, and at n = 2^20 a swap costs about 1/16 of
 # what the radix sort costs per object.
 MAX_SWAPS_PER_OBJECT = 16
+RETRY_REPAIR = 8
+# A lattice square fitted afresh is this share of its size wider on every side (lattice_frame).
+FRAME_SLACK = 1.0 / 16
 MAX_DEPTH = 26  # 2 * 26 + 5 = 57 key bits; 2^26 cells per side is finer than any scene needs
 # Columns of the node table: slice (start, end of own objects, end), depth, first of the four
 # children (NO_CHILD in a leaf), and the node's cell on the lattice of its depth.
@@ -148,25 +151,49 @@ def node_bounds(nodes, box):
 
 
 @nb.njit(cache=True)
-def quadtree_build(positions, radii, depth, capacity, last_order, order, work, box):
+def lattice_frame(xy, sr, last):
+    """The lattice square (x0, y0, size) for this frame: last frame's (`last`, size 0 before the
+    first) while every box still lies inside it and the boxes span at least half of it, else the
+    square around the boxes widened by FRAME_SLACK of its size on every side. A square that stays
+    put keeps every key of an object that stays in its cell, so last frame's order needs little
+    repair; one fitted afresh every frame shifts the whole lattice whenever the outermost object
+    moves (measured on the settled pile at n = 65536: the repair gave up every frame)."""
+    x0, y0, size = box_frame(xy, sr)
+    lx0, ly0, lsize = last[0], last[1], last[2]
+    if lsize > 0 and x0 >= lx0 and y0 >= ly0 and x0 + size <= lx0 + lsize and y0 + size <= ly0 + lsize \
+            and size >= 0.5 * lsize:
+        return lx0, ly0, lsize
+    if size == 0:
+        return x0, y0, size
+    slack = FRAME_SLACK * size
+    wider = size + 2.0 * slack
+    if not np.isfinite(wider):
+        return x0, y0, size
+    return x0 - slack, y0 - slack, wider
+
+
+@nb.njit(cache=True)
+def quadtree_build(positions, radii, depth, capacity, last_order, order, work, box, frame, repair):
     """This frame's sorted order into `order` and boxes in that order into `box` (rows lx, hx, ly, hy);
     returns the sorted keys, node table, node bounds, lattice square (x0, y0, size) and the
     insertion-sort swaps (-1 after a sort from scratch).
 
     The objects are taken in last frame's order (`last_order`, its first entry -1 before the first
     frame), so that the keys are almost sorted: an insertion sort repairs them in O(n) while few
-    objects change cell, and the boxes are then filled from near-sequential reads. `work` (xy,
-    radii, keys, permutation) is the caller's, reused from frame to frame.
+    objects change cell (tried only with `repair`), and the boxes are then filled from near-sequential reads. `work` (xy,
+    radii, keys, permutation) is the caller's, reused from frame to frame, and so is `frame`, the
+    lattice square (see lattice_frame), updated in place.
     """
     n = positions.shape[0]
     xy, sr, keys, perm = work
     fresh = n == 0 or last_order[0] < 0
     gather(positions, radii, np.arange(n) if fresh else last_order, xy, sr)
-    x0, y0, size = box_frame(xy, sr)
+    x0, y0, size = lattice_frame(xy, sr, frame)
+    frame[0], frame[1], frame[2] = x0, y0, size
     quadtree_keys(xy, sr, depth, x0, y0, size, keys)
     for a in range(n):
         perm[a] = a
-    swaps = -1 if fresh else insertion_sort(perm, keys, MAX_SWAPS_PER_OBJECT)
+    swaps = -1 if fresh or not repair else insertion_sort(perm, keys, MAX_SWAPS_PER_OBJECT)
     if swaps < 0:
         quadtree_keys(xy, sr, depth, x0, y0, size, keys)  # the failed repair left them part-sorted
         sorted_perm, sorted_keys = radix_sort(keys)
@@ -248,14 +275,25 @@ class Quadtree(StaticsApart, SmallScenes, BroadPhase):
         self._order, self._spare_order = np.full(n, -1, dtype=np.int64), np.empty(n, dtype=np.int64)
         self._work = (np.empty((n, 2)), np.empty(n), np.empty(n, dtype=np.uint64), np.empty(n, dtype=np.int64))
         self._box = np.empty((4, n))  # by column: scans compare four contiguous runs
+        self._lattice = np.zeros(3)  # (x0, y0, size) of the lattice square; none yet
+        self._gave_up, self._waited = False, 0  # whether the last repair tried gave up; frames since
         self._update(positions)
 
     def _update(self, positions):
         if not self.params["coherent"]:
             self._order[:1] = -1  # no last order (as before the first frame): sort from the input order
+            self._lattice[:] = 0.0  # and a lattice fitted to this frame alone
+        # A repair that gave up last frame is likely to give up again, after costing more than the
+        # sort: it is tried again only every RETRY_REPAIR frames until one succeeds.
+        repair = self._order[:1].min(initial=0) >= 0 and (not self._gave_up or self._waited >= RETRY_REPAIR)
         self._keys, self._nodes, self._bounds, self._frame, swaps = quadtree_build(
-            positions, self.radii, self._max_depth, self._capacity, self._order, self._spare_order, self._work, self._box
+            positions, self.radii, self._max_depth, self._capacity, self._order, self._spare_order, self._work, self._box,
+            self._lattice, repair
         )
+        if repair:
+            self._gave_up, self._waited = swaps < 0, 0
+        else:
+            self._waited += 1
         self._order, self._spare_order = self._spare_order, self._order
         # Nodes are breadth first, so the last one is among the deepest.
         self._stats = {"nodes": len(self._nodes), "depth": int(self._nodes[-1, DEPTH]), "swaps": swaps}
