@@ -123,3 +123,42 @@ def test_own_grid_never_sorts_or_tests_statics_against_each_other():
     assert grid.pairs().tolist() == [[k, 100] for k in range(100)]
     assert grid.stats()["static_tests"] == 100 and grid.stats()["statics"] == 100
     grid.validate()
+
+
+def test_mujoco_keeps_statics_in_the_world_body_and_parks_objects_that_are_not_alive():
+    pytest.importorskip("mujoco")
+    positions = np.array([[0.0, 0.0], [5.0, 0.0], [2.0, 0.0], [60.0, 0.0], [62.0, 0.0]])
+    static = np.array([True, True, False, False, False])
+    backend = engines.create("mujoco.sap")
+    backend.reset(positions, np.full(5, 3.0), static=static, alive=np.array([True, True, True, True, False]))
+    model = backend._model
+    assert (model.geom_bodyid[backend._geom_object.argsort()][:2] == 0).all(), "statics are world geoms"
+    assert model.nbody == 1 + 3  # the world and one body per mover, alive or parked
+    assert backend.pairs().tolist() == [[0, 2], [1, 2]]  # never the two statics
+    backend.update(positions, alive=np.ones(5, dtype=bool))  # object 4 spawns: switched on, not recompiled
+    assert backend._model is model
+    assert backend.pairs().tolist() == [[0, 2], [1, 2], [3, 4]]
+    backend.update(positions, alive=np.array([True, False, True, True, True]))  # a static goes
+    assert backend.pairs().tolist() == [[0, 2], [3, 4]]
+
+
+@pytest.mark.parametrize("name", ["physx.sap", "physx.mbp", "physx.pabp"])
+def test_physx_takes_statics_as_colliders_and_spawning_by_switching_collision(name):
+    pytest.importorskip("ovphysx")
+    positions = np.array([[0.0, 0.0], [5.0, 0.0], [2.0, 0.0], [60.0, 0.0], [62.0, 0.0]])
+    static = np.array([True, True, False, False, False])
+    backend = engines.create(name)
+    try:
+        backend.reset(positions, np.full(5, 3.0), static=static, alive=np.array([True, True, True, True, False]))
+        assert backend.pairs().tolist() == [[0, 2], [1, 2]]  # never the two statics; object 4 not there yet
+        stage = backend._stage
+        for alive, want in ((np.ones(5, dtype=bool), [[0, 2], [1, 2], [3, 4]]),
+                            (np.array([True, False, True, True, True]), [[0, 2], [3, 4]]),
+                            (np.array([False, True, True, False, True]), [[1, 2]])):
+            backend.update(positions, alive=alive)
+            assert backend.pairs().tolist() == want
+        assert backend._stage is stage, "spawning switched collision on and off; nothing was rebuilt"
+        backend.reset(positions[:2], np.full(2, 3.0), static=np.ones(2, dtype=bool))
+        assert backend.pairs().tolist() == []  # statics alone: no PhysX scene at all
+    finally:
+        backend.close()

@@ -7,6 +7,12 @@ Per frame the positions go into `qpos` as one array write, `mj_kinematics` place
 geoms (`d.contact.geom[:ncon]`), read as one array: "contacts". MuJoCo times its own broad phase
 (`mjTIMER_COL_BROAD`): that is the engine's broad-phase time.
 
+Statics are geoms of the world body (MuJoCo never pairs two geoms of one body), placed once;
+the moving objects are free bodies. Bodies cannot be added to a compiled model, so every object
+of the scene is in it from the reset on: one that is not alive is switched off by its collision
+masks (`geom_contype` and `geom_conaffinity` 0, which MuJoCo's filter drops from every pair) and
+switched on when it spawns, a pool of parked objects rather than a recompile.
+
 Limits, refused before they are hit: body ids are 16 bits (at most 65533 bodies), and
 `mj_collision` takes about 4 n^2 bytes of the model's arena for its broad phase (measured: 4.01
 to 4.09 n^2 from n = 1024 to 8192: its candidate pairs, n^2 / 2 ints, and as much again to sort
@@ -46,6 +52,7 @@ class MujocoSap(BroadPhase):
     name, method = "mujoco.sap", "sweep"
     exact = False
     reports = "contacts"
+    lifecycle = "native"
     limits = Limits(zero_radius=False, objects=MAX_BODIES,
                     why="MuJoCo's spheres need a positive size, and it numbers bodies in 16 bits")
 
@@ -62,7 +69,13 @@ class MujocoSap(BroadPhase):
         spec = mujoco.MjSpec()
         spec.option.gravity = [0.0, 0.0, 0.0]
         spec.memory = arena
-        for (x, y), r in zip(self._positions.tolist(), self._radii.tolist()):
+        static = self.static if self.static is not None else np.zeros(n, dtype=bool)
+        self._movers = np.flatnonzero(~static)
+        for k in np.flatnonzero(static).tolist():
+            x, y = self._positions[k].tolist()
+            spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[float(self._radii[k]), 0.0, 0.0],
+                                    pos=[x, y, 0.0])
+        for (x, y), r in zip(self._positions[self._movers].tolist(), self._radii[self._movers].tolist()):
             # Mass and inertia given, not derived from the sphere: a tiny sphere would be too light
             # for MuJoCo ("mass and inertia of moving bodies must be larger than mjMINVAL").
             body = spec.worldbody.add_body(pos=[x, y, 0.0], mass=1.0, inertia=[1.0, 1.0, 1.0], explicitinertial=True)
@@ -71,16 +84,31 @@ class MujocoSap(BroadPhase):
         self._contact_room = contact_room
         self._model = spec.compile()
         self._data = mujoco.MjData(self._model)
-        self._qpos = self._data.qpos.reshape(n, 7) if n else np.zeros((0, 7))
+        # Geoms of the world body come first, in the order added (the statics), then one per body.
+        body = self._model.geom_bodyid
+        world = body == 0
+        self._geom_object = np.empty(len(body), dtype=np.int64)
+        self._geom_object[world] = np.flatnonzero(static)
+        self._geom_object[~world] = self._movers[body[~world] - 1]
+        self._switch(self.alive if self.alive is not None else np.ones(n, dtype=bool))
+        self._qpos = self._data.qpos.reshape(len(self._movers), 7) if len(self._movers) else np.zeros((0, 7))
         self._qpos[:, 3] = 1.0  # unit quaternion
         self._broad = self._data.timer[mujoco.mjtTimer.mjTIMER_COL_BROAD]
         self._full = self._data.warning[mujoco.mjtWarning.mjWARN_CONTACTFULL]
         self._engine_s = None
         self._update(self._positions)
 
+    def _switch(self, alive: np.ndarray) -> None:
+        """Collision masks on for the objects alive, off for the others (parked)."""
+        on = alive[self._geom_object].astype(self._model.geom_contype.dtype)
+        self._model.geom_contype[:] = on
+        self._model.geom_conaffinity[:] = on
+
     def _update(self, positions):
         self._positions = positions
-        self._qpos[:, 0:2] = positions
+        if len(self.spawned) or len(self.removed):
+            self._switch(self.alive)
+        self._qpos[:, 0:2] = positions[self._movers]
         mujoco.mj_kinematics(self._model, self._data)
 
     def _pairs(self):
@@ -97,8 +125,8 @@ class MujocoSap(BroadPhase):
         self._stats = {"contacts": int(ncon)}
         if not ncon:
             return EMPTY_PAIRS.copy()
-        geoms = self._data.contact.geom[:ncon].astype(np.int64)  # geom k is object k
-        return np.column_stack([geoms.min(axis=1), geoms.max(axis=1)])
+        objects = self._geom_object[self._data.contact.geom[:ncon]]
+        return np.column_stack([objects.min(axis=1), objects.max(axis=1)])
 
     def _collide(self) -> float:
         """mj_collision, again with more room while contacts do not fit; the broad-phase timer's

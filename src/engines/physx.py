@@ -30,7 +30,8 @@ from .quiet import native_output_silenced
 from .pairs import canonical
 
 FRAME_DT = 1.0 / 60.0
-PREFIX = "/World/s"  # object k is the prim /World/s<k>
+PREFIX = "/World/s"  # moving object k is the prim /World/s<k>
+STATIC_PREFIX = "/World/f"  # static object k is the collider /World/f<k>, outside the contact binding's pattern
 
 # ovphysx is imported where it is first used, in the process that runs PhysX: loading its native
 # runtime starts threads, and a process that forks after that (the studies fork one child per
@@ -68,7 +69,8 @@ def _start_process():
     return ov
 
 
-def scene_usda(positions: np.ndarray, radii: np.ndarray, broadphase: str) -> str:
+def scene_usda(positions: np.ndarray, radii: np.ndarray, broadphase: str, static: np.ndarray | None = None,
+               alive: np.ndarray | None = None) -> str:
     lines = ["#usda 1.0", "(", '    defaultPrim = "World"', "    metersPerUnit = 1", '    upAxis = "Z"', ")",
              'def Xform "World"', "{", '    def PhysicsScene "physicsScene" (', '        prepend apiSchemas = '
              '["PhysxSceneAPI"]', "    )", "    {", "        vector3f physics:gravityDirection = (0, 0, -1)",
@@ -78,14 +80,26 @@ def scene_usda(positions: np.ndarray, radii: np.ndarray, broadphase: str) -> str
             '"PhysxContactReportAPI", "PhysxRigidBodyAPI"]\n    )\n    {{\n        double radius = {r!r}\n'
             '        double3 xformOp:translate = ({x!r}, {y!r}, 0)\n        uniform token[] xformOpOrder = '
             '["xformOp:translate"]\n        float physxContactReport:threshold = 0\n'
-            '        float physxRigidBody:sleepThreshold = 0\n    }}')
-    lines += [body.format(i=i, r=r, x=x, y=y) for i, ((x, y), r) in enumerate(zip(positions.tolist(), radii.tolist()))]
+            '        float physxRigidBody:sleepThreshold = 0\n{off}    }}')
+    # A static object is a collider without a rigid body: PhysX puts it in its static pruner and
+    # never pairs two of them.
+    # An object that is not alive has its collision off (see _PhysX._enable).
+    fixed = ('    def Sphere "f{i}" (\n        prepend apiSchemas = ["PhysicsCollisionAPI"]\n    )\n    {{\n'
+             '        double radius = {r!r}\n        double3 xformOp:translate = ({x!r}, {y!r}, 0)\n'
+             '        uniform token[] xformOpOrder = ["xformOp:translate"]\n{off}    }}')
+    off = "        bool physics:collisionEnabled = 0\n"
+    static = np.zeros(len(radii), dtype=bool) if static is None else static
+    alive = np.ones(len(radii), dtype=bool) if alive is None else alive
+    lines += [(fixed if still else body).format(i=i, r=r, x=x, y=y, off="" if on else off)
+              for i, ((x, y), r, still, on) in enumerate(zip(positions.tolist(), radii.tolist(), static.tolist(),
+                                                             alive.tolist()))]
     return "\n".join(lines + ["}"]) + "\n"
 
 
 class _PhysX(BroadPhase):
     exact = False
     reports = "contacts"
+    lifecycle = "native"
     breaks = FLOAT32_BREAKS
     # A sphere of radius 0 is an invalid shape to PhysX: it leaves the object out, and its pairs are lost.
     # At its default density a sphere's inverse inertia, 1 / (1.7e3 r^5), overflows float32 below
@@ -97,11 +111,11 @@ class _PhysX(BroadPhase):
 
     def _reset(self, positions, radii):
         self.close()
-        if self.n == 0:  # no bodies: nothing for PhysX to do (and a contact binding needs one)
-            return
+        if self.n == 0 or (self.static is not None and self.static.all()):
+            return  # no bodies: nothing for PhysX to do, as two statics never pair (and a contact binding needs one)
         self._folder = Path(tempfile.mkdtemp(prefix="broadphase-physx-"))
         usda = self._folder / "scene.usda"
-        usda.write_text(scene_usda(positions, radii, self.broadphase))
+        usda.write_text(scene_usda(positions, radii, self.broadphase, self.static, self.alive))
         ov = _start_process()
         self._contacts = self._query = self._stage = None
         self._physx = ov.PhysX()
@@ -112,6 +126,7 @@ class _PhysX(BroadPhase):
             # back to ePABP", every time: the fallback this backend exists to measure (docs/engines.md)
             self._physx.wait_task(self._physx.attach_ovstage(self._stage, read_ordinal=1))
         self._physx.wait_all()
+        self._ordinal = 1  # the stage's last sealed edit
         self._query = self._physx.query(ov.SimObjectType.RIGID_BODY, scope=ov.ObjectScope.ALL).wait()
         self._bind_contacts(max(64, 16 * self.n))
         self._known = (np.empty(0, np.uint64), np.empty(0, np.int64))  # actor ids seen, sorted; their objects
@@ -142,7 +157,9 @@ class _PhysX(BroadPhase):
         if len(new):
             new = np.unique(new)
             paths = self._contacts.get_other_actor_paths_from_ids(new)
-            objects = np.array([int(p[len(PREFIX):]) if p.startswith(PREFIX) else -1 for p in paths], dtype=np.int64)
+            objects = np.array([int(p[len(PREFIX):]) if p.startswith(PREFIX) else
+                                int(p[len(STATIC_PREFIX):]) if p.startswith(STATIC_PREFIX) else -1 for p in paths],
+                               dtype=np.int64)
             if (objects < 0).any():
                 raise RuntimeError(f"{self.name}: a contact names {paths[int(np.argmax(objects < 0))]!r}, not an object")
             known, index = np.concatenate([known, new]), np.concatenate([index, objects])
@@ -154,8 +171,36 @@ class _PhysX(BroadPhase):
     def _update(self, positions):
         if self._physx is None:
             return
+        if len(self.spawned) or len(self.removed):
+            first = self._ordinal + 1
+            self._enable(self.spawned, True)
+            self._enable(self.removed, False)
+            self._physx.wait_task(self._physx.update_from_ovstage(first, self._ordinal))
         self._xyz[:, :2] = positions
         self._write_positions()
+
+    def _enable(self, objects: np.ndarray, on: bool) -> None:
+        """Collision on or off for these objects, PhysX's own means to add a shape to its broad
+        phase or take it out: `physics:collisionEnabled` written to the stage as one edit, which
+        the caller hands to PhysX (`update_from_ovstage`)."""
+        if not len(objects):
+            return
+        static = self.static if self.static is not None else np.zeros(self.n, dtype=bool)
+        names = [f"{STATIC_PREFIX if static[k] else PREFIX}{k}" for k in objects.tolist()]
+        ovstage = ov.ovstage
+        self._ordinal += 1
+        with ovstage.PathDictionary(self._stage) as paths:
+            listed = paths.create_path_list_from_strings(names)
+            query = self._stage.query_from_path_list(listed)
+            try:
+                flags = ovstage.make_dltensor(np.full(len(names), on), shape=[len(names)], ndim=1,
+                                              dtype=ovstage.DLDataType(ovstage.DLDataTypeCode.kDLBool, 8, 1))
+                self._stage.write_attribute(query, "physics:collisionEnabled", self._ordinal, flags,
+                                            is_array=False).wait()
+            finally:
+                self._stage.release_query(query).wait()
+                paths.destroy_path_list(listed)
+        self._stage.advance_write_floor(ordinal=self._ordinal).wait()
 
     def _write_positions(self) -> None:
         """The objects' positions (self._xyz) and zero velocities, in one write session."""
