@@ -55,11 +55,11 @@ def test_quick_tune_end_to_end_writes_rows_figures_and_best(tmp_path, capsys):
     assert tune.main(["--n", "128", "--quick", "--backends", "own.quadtree,own.sap", "--sizes", "64,128",
                       "--out", str(out)]) == 0
     rows = pd.read_csv(out / "tune.csv")
-    # quadtree: 7 capacities + 7 depths; sap: 3 axes + 3 sweeps; at both sizes.
-    assert len(rows) == 2 * (7 + 7 + 2 + 3 + 3 + 2)  # + the best again and the default, per backend
+    # quadtree: 7 capacities + 7 depths; sap: 3 axes + 3 sweeps + 3 strips; at both sizes.
+    assert len(rows) == 2 * (7 + 7 + 2 + 3 + 3 + 3 + 2)  # + the best again and the default, per backend
     assert set(rows.n) == {64, 128} and (rows.status == "ok").all()
     best = pd.read_csv(out / "best.csv")
-    assert set(best.param) == {"capacity", "max_depth", "axis", "sweep"}
+    assert set(best.param) == {"capacity", "max_depth", "axis", "sweep", "strips"}
     for name in ("tune_n64.png", "tune_n128.png", "optimum_vs_n.png", "meta.json"):
         assert (out / name).stat().st_size > 1000 or name == "meta.json"
     assert "own.quadtree: best capacity=" in capsys.readouterr().out
