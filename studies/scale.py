@@ -116,15 +116,15 @@ VERSUS = ["dist", "n", "ours", "ours_ms", "engine", "engine_ms", "ratio", "timed
           "ours_bp", "ours_bp_ms", "bp_ratio"]
 
 
-def ours_against_engines_per_n(medians: pd.DataFrame) -> pd.DataFrame:
+def ours_against_engines_per_n(medians: pd.DataFrame, kind: str = "engine") -> pd.DataFrame:
     """Per distribution and n where both ran: our fastest backend on one thread (as the engines
-    run) and the fastest engine, end to end per frame, and the ratio; and, where an engine that
-    ran reports its own broad-phase time, the fastest by that timer against our quickest
-    update + pairs (`bp_ratio`)."""
+    run) and the fastest backend of `kind` ("engine", or "particle": the neighbour-list libraries),
+    end to end per frame, and the ratio; and, where one that ran reports its own broad-phase time,
+    the fastest by that timer against our quickest update + pairs (`bp_ratio`)."""
     rows = []
     for (dist, n), d in medians.groupby(["dist", "n"], sort=False):
         ours = d[d.backend.map(lambda b: engines.of_kind(b, "own") and not engines.uses_every_core(b))]
-        rivals = d[d.backend.map(lambda b: engines.of_kind(b, "engine"))]
+        rivals = d[d.backend.map(lambda b: engines.of_kind(b, kind))]
         if len(ours) and len(rivals):
             best, engine = ours.loc[ours.ms.idxmin()], rivals.loc[rivals.ms.idxmin()]
             row = {"dist": dist, "n": n, "ours": best.backend, "ours_ms": best.ms, "engine": engine.backend,
@@ -202,6 +202,18 @@ def report(medians: pd.DataFrame, exponents: dict, stopped: dict, meta: dict, fo
         lines += [f"| {r.dist} | {r.n} | {r.ours} | {r.ours_ms:.3g} | {r.engine} | {r.engine_ms:.3g} | {r.ratio:.1f}x | "
                   + (f"{r.timed_engine} | {r.engine_bp_ms:.3g} | {r.ours_bp} | {r.ours_bp_ms:.3g} | {r.bp_ratio:.1f}x |"
                      if isinstance(r.timed_engine, str) else "- | - | - | - | - |") for r in versus.itertuples()]
+    particles = ours_against_engines_per_n(medians, "particle")
+    lines += ["", "## Our fastest backend against the fastest neighbour-list library", "",
+              "The libraries of particle simulation ("
+              + ", ".join(f.name for f in engines.FAMILIES.values() if f.kind == "particle")
+              + "; docs/engines.md says how each is called), end to end per frame, ours on one thread. They build "
+              "their structure anew every call (no temporal coherence) and time no broad phase of their own.", ""]
+    if particles.empty:
+        lines.append("No n where one of ours and one of them both ran.")
+    else:
+        lines += ["| dist | n | ours | ms | library | ms | library / ours |", "|---|---|---|---|---|---|---|"]
+        lines += [f"| {r.dist} | {r.n} | {r.ours} | {r.ours_ms:.3g} | {r.engine} | {r.engine_ms:.3g} | {r.ratio:.1f}x |"
+                  for r in particles.itertuples()]
     lines += ["", "## Compile time", ""]
     compile_s = meta["compile"]
     if "error" in compile_s:
@@ -322,6 +334,13 @@ def finish(medians: pd.DataFrame, stopped: dict, meta: dict, out: Path, report_d
     for r in backend_rows(medians, exponents, stopped):
         print(f"{r['backend']:<20} {r['dist']:<9} {r['n']:>10} {r['ms']:>16.3f} {r['growth']:>7.2f} {r['peak_mb']:>8.0f}"
               + (f"   stopped at {r['why']}" if r["why"] else ""))
+    particles = ours_against_engines_per_n(medians, "particle")
+    if len(particles):
+        print(f"\n{'dist':<9} {'n':>8} {'our fastest':<20} {'ms':>9} {'fastest neighbour list':<22} {'ms':>9} "
+              f"{'library/ours':>13}")
+        for r in particles.itertuples():
+            print(f"{r.dist:<9} {r.n:>8} {r.ours:<20} {r.ours_ms:>9.3f} {r.engine:<22} {r.engine_ms:>9.3f} "
+                  f"{r.ratio:>12.1f}x")
     if "error" in compile_s:
         print(f"\nnumba compile of our kernels: NOT MEASURED, the probe failed: {compile_s['error']}")
     else:

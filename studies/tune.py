@@ -22,6 +22,7 @@ import pandas as pd
 
 import engines
 from own.grid import GRID_CELL_FACTORS, MAX_CELLS_PER_OBJECT
+from own.verlet import SKIN_FACTORS
 from own.sap import SPARSE_PAIRS_PER_OBJECT
 from scenes import FAMILIES as RECORDED_FAMILIES
 from scenes import Scene, generate
@@ -54,6 +55,11 @@ FAMILY_SIZES = (1024, 8192)
 OWN = ["own.grid", "own.grid_incremental", "own.sap", "own.sap_incremental", "own.quadtree", "own.bvh", "own.verlet"]
 EXACT_KNOBS = {"own.verlet": ("skin",)}
 MAX_DEFAULT_LOSS = 0.3  # a default rule is within 1.3x of the tuned optimum on every family
+# Knobs swept in sizes of the scene's own (cells from the default cell, skins from the mean
+# diameter): the rule table compares their factors across scenes, not the sizes.
+SCENE_SCALED = {"own.grid": ("cell / default cell", GRID_CELL_FACTORS),
+                "own.grid_incremental": ("cell / default cell", GRID_CELL_FACTORS),
+                "own.verlet": ("skin / mean diameter", SKIN_FACTORS)}
 
 
 def describe_result(t: Tuned) -> str:
@@ -217,14 +223,14 @@ def rule_table(curves: pd.DataFrame) -> list[str]:
     lines = []
     for (backend, param), d in curves.groupby(["backend", "param"], sort=False):
         d = d.copy()
-        if backend == "own.grid":  # cell sizes differ per scene: compare the factors
-            d["value"] = [GRID_CELL_FACTORS[s] for s in d["step"]]
+        if backend in SCENE_SCALED:  # sizes differ per scene: compare the factors
+            d["value"] = [SCENE_SCALED[backend][1][s] for s in d["step"]]
         g = d.groupby("value", sort=False)["relative"].agg(["mean", "max"])
         try:
             g = g.sort_index(key=lambda v: v.astype(float))
         except (TypeError, ValueError):
             pass
-        name = "cell / default cell" if backend == "own.grid" else param
+        name = SCENE_SCALED[backend][0] if backend in SCENE_SCALED else param
         lines += [f"**{backend}, {name}**", "",
                   "| " + " | ".join([name, *map(str, g.index)]) + " |", "|" + "---|" * (len(g) + 1),
                   "| mean | " + " | ".join(f"{v:.2f}" for v in g["mean"]) + " |",
@@ -251,8 +257,8 @@ def write_tuning_md(table: pd.DataFrame, curves: pd.DataFrame, path: Path, args)
         "  overlaps (then the axis along which the boxes extend further), else the axis along which the centres",
         f"  vary most and the sparse sweep while last frame found at most {SPARSE_PAIRS_PER_OBJECT} pairs per object",
         "  (`SPARSE_PAIRS_PER_OBJECT`) and float32 tells the objects apart.",
-        "- `own.bvh`: at most 8 objects per leaf.",
-        "- `own.verlet`: skin half a mean diameter, halved after a list that lived one frame, grown back after",
+        "- `own.bvh`: at most 16 objects per leaf.",
+        "- `own.verlet`: skin a quarter of a mean diameter, halved after a list that lived one frame, grown back after",
         "  one that lived long (only the skin is swept: its other knobs give up exactness).",
         "",
         "![time against each knob, relative to the best on each scene](figures/tuning_rules.png)",

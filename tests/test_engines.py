@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import re
+import resource
 import subprocess
 import sys
 import textwrap
@@ -124,7 +125,8 @@ def check_frame(backend, positions, radii):
 def within_limits(name, positions, radii):
     """Neither a known limitation nor input the engine refuses by its declared limits."""
     positions, radii = np.asarray(positions, dtype=float).reshape(-1, 2), np.asarray(radii, dtype=float)
-    if engines.backend_class(name).limits.problem(positions, radii):
+    cls = engines.backend_class(name)
+    if cls.limits.problem(positions, radii) or (hasattr(cls, "cells_problem") and cls.cells_problem(positions, radii)):
         return False
     return not any(applies(positions, radii) for applies in LIMITATIONS.get(name, []))
 
@@ -360,6 +362,10 @@ REFUSED = [  # (backend, positions, radii, the words of the refusal, what the en
      "timeout"),  # its int cell indices overflow and it loops
     ("coal.hash", generate("uniform", 300, seed=1).positions, ONE_LARGE, "object 0 covers",
      "timeout"),  # 1.6 million cells: 41 s for one frame
+    ("mdanalysis.nsgrid", SPREAD * 1e300, np.ones(50), "coordinates up to 9.95e+299, beyond its limit of 1e+38",
+     ("[]", "SIGABRT")),  # float32 makes every point infinite: it finds nothing (and at times aborts as it exits)
+    ("freud.linkcell", SPREAD * 100, np.full(50, 1e-4), "9.85e+11 cells of width 0.0002",
+     "MemoryError"),  # a cell list of 1e12 cells: std::bad_alloc here (with the memory capped; uncapped, the OOM killer)
 ]
 
 
@@ -382,6 +388,9 @@ def test_a_move_beyond_an_engines_limits_is_refused_too():
         backend.update([[0.0, 0.0], [1e300, 0.0]])
 
 
+# Engines whose unguarded failure is exhausting the memory: run with this much address space, so
+# that the test sees the engine's own error rather than the machine's out-of-memory killer.
+UNGUARDED_MEMORY = {"freud.linkcell": 4 << 30}
 UNGUARDED = textwrap.dedent("""
     import sys, numpy as np
     import engines
@@ -389,7 +398,7 @@ UNGUARDED = textwrap.dedent("""
     name, positions, radii = sys.argv[1], np.load(sys.argv[2]), np.load(sys.argv[3])
     cls = engines.backend_class(name)
     cls.limits = NO_LIMITS
-    cls._check_cells = lambda self, positions: None  # the hashes' own guards
+    cls._check_cells = lambda self, positions: None  # the hashes' and cell lists' own guards
     backend = cls()
     try:
         backend.reset(positions, radii)
@@ -413,13 +422,19 @@ def test_the_guards_are_needed_unguarded_the_engine_fails(name, positions, radii
     # glibc's smallest mmap threshold: a freed large block goes back to the system at once, so a use
     # after free (coal's array tree) segfaults whatever was imported before.
     env = {**os.environ, "MALLOC_MMAP_THRESHOLD_": "131072"}
+    cap = UNGUARDED_MEMORY.get(name)  # bytes of address space, where the failure is running out of memory
+
+    def limit_memory():
+        resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
+
     try:
         done = subprocess.run([sys.executable, "-c", UNGUARDED, name, str(tmp_path / "p.npy"), str(tmp_path / "r.npy")],
-                              capture_output=True, text=True, timeout=10, env=env)
-        seen = "SIGSEGV" if done.returncode == -11 else done.stdout.strip().splitlines()[-1]
+                              capture_output=True, text=True, timeout=10, env=env,
+                              preexec_fn=limit_memory if cap else None)
+        seen = {-11: "SIGSEGV", -6: "SIGABRT"}.get(done.returncode) or done.stdout.strip().splitlines()[-1]
     except subprocess.TimeoutExpired:
         seen = "timeout"
-    assert seen == unguarded
+    assert seen in (unguarded if isinstance(unguarded, tuple) else (unguarded,))
 
 
 @pytest.mark.engine_limitation

@@ -24,7 +24,7 @@ ROW_WRITERS = ["compare", "essay", "stress", "scale", "tune", "recommend"]
 def test_every_backend_belongs_to_a_registered_family():
     for name in engines.names():
         family = engines.family(name)
-        assert family.kind in ("own", "essay", "engine", "library") and family.colour and family.title
+        assert family.kind in ("own", "essay", "engine", "particle", "library") and family.colour and family.title
 
 
 def test_every_family_package_is_pinned_in_pyproject_as_the_registry_says():
@@ -33,8 +33,8 @@ def test_every_family_package_is_pinned_in_pyproject_as_the_registry_says():
         where = project["optional-dependencies"][family.extra] if family.extra else project["dependencies"]
         for requirement in family.requirements:
             assert requirement in where, (family.name, requirement)
-            if family.kind == "engine":
-                assert "==" in requirement, f"{family.name}: engine versions are pinned"
+            if family.kind in ("engine", "particle"):
+                assert "==" in requirement, f"{family.name}: engine and particle library versions are pinned"
     # The test extra installs every engine, so every adapter is tested.
     extras = {f.extra for f in engines.FAMILIES.values() if f.extra}
     tested = {extra for dep in project["optional-dependencies"]["test"] if "[" in dep
@@ -64,7 +64,7 @@ def test_the_readme_and_engines_page_name_every_backend_and_engine_family():
         assert f"`{name}`" in readme or f"`.{name.split('.')[1]}`" in readme, f"README's backend table lacks {name}"
     page = (ROOT / "docs" / "engines.md").read_text()
     for family in engines.FAMILIES.values():
-        if family.kind in ("engine", "library"):
+        if family.kind in ("engine", "particle", "library"):
             for package in family.packages:
                 assert package in page, f"docs/engines.md says nothing of {package}"
 

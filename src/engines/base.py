@@ -80,6 +80,9 @@ NO_LIMITS = Limits()
 # The `breaks` of engines that store positions in float32 (evidence: test_engines' float32 test).
 FLOAT32_BREAKS = ("It stores positions in float32: pairs that touch by less than float32 resolves at their "
                   "coordinates are lost (at 1e6 its values are 1/16 apart, at 1e9 64 apart).")
+# The limits of a library that computes in float32 and has no guard of its own: beyond float32's
+# range every value is infinite (measured: MDAnalysis's grid then finds nothing).
+FLOAT32_LIMITS = Limits(coordinate=1e38, radius=1e38, why="it computes in float32, whose range ends at 3.4e38")
 
 
 def hash_cells_problem(positions: np.ndarray, radii: np.ndarray, cell: float, most: int, dims: int = 2,
@@ -108,7 +111,8 @@ class BroadPhase(ABC):
     the registry), `reports` (see above), `exact` (True when the pairs are exactly the box
     overlaps, no extra candidates), `defaults`, the parameters with their defaults (unknown
     parameters are an error), `sweeps`, the values a tuning sweep tries for some of them, `method`,
-    the kind of structure ("grid", "hash", "sweep", "tree", "kdtree", "brute"), `breaks`, what
+    the kind of structure ("grid", "hash", "sweep", "tree", "kdtree", "brute", or "auto" where the
+    library picks one per call), `breaks`, what
     the evidence tests established about the inputs it mishandles (empty when none), and `limits`,
     the input it survives (the rest is refused with a ValueError).
     """

@@ -18,7 +18,7 @@ from typing import Any, Literal
 
 from .base import BroadPhase
 
-Kind = Literal["own", "essay", "engine", "library"]
+Kind = Literal["own", "essay", "engine", "particle", "library"]
 
 
 @dataclass(frozen=True)
@@ -26,8 +26,9 @@ class Family:
     """What the backends of one family ("chipmunk" in "chipmunk.bbtree") share.
 
     `kind`: "own" (our compiled code), "essay" (the essay's Python methods), "engine" (a physics
-    engine's broad phase: what our backends are set against) or "library" (a general-purpose
-    library). `requirements` are the pinned distributions as pyproject.toml lists them, `extra`
+    engine's broad phase: what our backends are set against), "particle" (a neighbour-list library
+    of particle simulation, the other thing a user with many circles reaches for) or "library" (a
+    general-purpose library). `requirements` are the pinned distributions as pyproject.toml lists them, `extra`
     the optional extra that installs them when they are too large to be ordinary dependencies.
     """
 
@@ -67,6 +68,11 @@ FAMILIES: dict[str, Family] = {f.name: f for f in [
     Family("mujoco", "engine", "MuJoCo", "slategray", ("mujoco==4.0.0",)),
     Family("warp", "library", "NVIDIA Warp's hash grid", "yellowgreen", ("warp-lang==1.19.0",), "warp"),
     Family("scipy", "library", "scipy's k-d tree", "tab:olive", ("scipy>=1.11",)),
+    Family("mdanalysis", "particle", "MDAnalysis's neighbour search", "tab:red", ("MDAnalysis==2.11.0",)),
+    Family("freud", "particle", "freud's neighbour queries", "teal", ("freud-analysis==3.4.0",)),
+    Family("matscipy", "particle", "matscipy's neighbour list", "sienna", ("matscipy==1.3.1",)),
+    Family("vesin", "particle", "vesin's neighbour list", "magenta", ("vesin==0.6.2",)),
+    Family("sklearn", "particle", "scikit-learn's trees", "darkorchid", ("scikit-learn==1.9.1",)),
 ]}
 
 # name -> "module:Class". Engine adapters import their binding at module level, so an import
@@ -111,6 +117,13 @@ BACKENDS: dict[str, str] = {
     "mujoco.sap": "engines.mujoco_collision:MujocoSap",
     "warp.hashgrid": "engines.warp_grid:WarpHashGrid",
     "scipy.kdtree": "engines.scipy_kdtree:KDTree",
+    "mdanalysis.nsgrid": "engines.mdanalysis_ns:MdaFastNS",
+    "freud.aabb": "engines.freud_locality:FreudAabb",
+    "freud.linkcell": "engines.freud_locality:FreudLinkCell",
+    "matscipy.cells": "engines.matscipy_neighbours:MatscipyCells",
+    "vesin.cells": "engines.vesin_neighbours:VesinCells",
+    "sklearn.kdtree": "engines.sklearn_neighbors:SklearnKDTree",
+    "sklearn.balltree": "engines.sklearn_neighbors:SklearnBallTree",
 }
 
 
@@ -137,7 +150,7 @@ def uses_every_core(name: str, params: dict | None = None) -> bool:
 
 
 def of_kind(name: str, *kinds: Kind) -> bool:
-    """Whether the backend's family is of one of these kinds ("own", "essay", "engine", "library")."""
+    """Whether the backend's family is of one of these kinds ("own", "essay", "engine", "particle", "library")."""
     return family(name).kind in kinds
 
 

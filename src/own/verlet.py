@@ -34,6 +34,10 @@ PRECISIONS = ("float64", "float32")
 # 0.105; on the essay's motion, where a list lives about 40 frames, the skin stays the default.
 SHRINK_BELOW, LONG_LIVED, PROBE_AFTER, SMALLEST_SKIN_SHARE = 2, 8, 16, 1.0 / 16.0
 SKIN_FACTORS = (0.05, 0.1, 0.25, 0.5, 1.0, 2.0)  # the skin, in mean diameters, for a sweep
+# The default skin, in mean diameters. In the tuning study over the families (docs/TUNING.md,
+# 10 frames), a quarter diameter came within 1.16x of each scene's best fixed skin on average,
+# half a diameter (the default before) within 1.40x; the best fixed skin was 0.05 to 0.5 diameters.
+DEFAULT_SKIN_DIAMETERS = 0.25
 
 
 @nb.njit(cache=True)
@@ -59,7 +63,7 @@ def largest_step(positions, built):
 
 
 class VerletList(StaticsApart, BroadPhase):
-    """Verlet neighbour list over our exact grid; `skin` (default half a mean diameter), `every`
+    """Verlet neighbour list over our exact grid; `skin` (default a quarter of a mean diameter), `every`
     (None: rebuild when an object has moved skin / 2, exact; k: every k frames, approximate),
     `precision` ("float64", or "float32": inputs rounded first, approximate), `fat` (True: the
     fat-box pairs, untested)."""
@@ -93,7 +97,7 @@ class VerletList(StaticsApart, BroadPhase):
     def _reset(self, positions, radii):
         self._radii = self._rounded(radii)
         positive = self._radii[self._radii > 0]
-        default = float(positive.mean()) if len(positive) else 1.0  # half a mean diameter
+        default = DEFAULT_SKIN_DIAMETERS * 2.0 * float(positive.mean()) if len(positive) else 1.0
         self._skin = float(self.params["skin"]) if self.params["skin"] is not None else default
         self._default_skin, self._adapts = self._skin, self.params["skin"] is None and self.params["every"] is None
         self._bare_rebuilds = 0  # rebuilds in a row at zero skin
