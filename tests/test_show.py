@@ -30,10 +30,11 @@ def draw(name, **params):
 @pytest.mark.parametrize(("name", "params", "expected"), [
     # Centres span 80: cells of 30 give 3 x 3.
     ("own.grid", {"cell": 30.0}, {"cells": 9}),
-    # Root (the middle circle straddles it and stays), its 4 children, the lower-left child's 4
-    # (both corner circles fall in its lower-left quarter), and that one's 4 (the second circle
-    # straddles its middle; the first goes one level down and stops: capacity 1).
-    ("own.quadtree", {"capacity": 1}, {"nodes": 13}),
+    # The lattice square is the boxes' (5 to 95) widened by a sixteenth on each side: -0.625 to
+    # 100.625. Root (the middle circle straddles it and stays), its 4 children, and the lower-left
+    # child's 4 (both corner circles fall in its lower-left quarter, where each straddles a middle
+    # line of the next level, so that quarter is a leaf though it holds two: capacity 1).
+    ("own.quadtree", {"capacity": 1}, {"nodes": 9}),
     ("own.sap", {"axis": "x"}, {"intervals": 4}),
     ("own.brute", {}, {}),
 ])
