@@ -15,6 +15,7 @@ import freud
 import numpy as np
 
 from .base import FLOAT32_BREAKS
+from .cutoff import CUTOFF_PAD, CutoffSearch, image_free_side, in_3d
 
 # freud runs its queries on every core through TBB unless told otherwise; the study sets backends
 # against each other on one thread (ours too, but for the variants named as using every core). The
@@ -22,8 +23,6 @@ from .base import FLOAT32_BREAKS
 # set for good (`set_num_threads`) would hold numba's parallel kernels to one thread too, and
 # made a later fork of the process hang (measured: the study forks a child per job).
 ONE_THREAD = 1
-from .cutoff import CUTOFF_PAD, CutoffSearch, image_free_side, in_3d
-
 
 # LinkCell keeps about 23 bytes a cell (measured: 9e6 cells of the box took 206 MB more); more
 # cells than this are refused rather than filling the memory (1e8, at radius 1e-6 over a 2000 box,

@@ -9,9 +9,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from own.common import boxes
-
 from .base import EMPTY_PAIRS, BroadPhase, Limits
+from .cutoff import box_filtered
 
 
 class KDTree(BroadPhase):
@@ -31,8 +30,5 @@ class KDTree(BroadPhase):
         if self._tree is None:
             return EMPTY_PAIRS.copy()
         found = self._tree.query_pairs(2.0 * float(self.radii.max()), p=np.inf, output_type="ndarray")
-        lo, hi = boxes(self._pos, self.radii)
-        i, j = found[:, 0], found[:, 1]
-        keep = (lo[j] <= hi[i]).all(axis=1) & (lo[i] <= hi[j]).all(axis=1)
         self._stats = {"kd_pairs": len(found)}
-        return np.sort(found[keep], axis=1).astype(np.int64)
+        return box_filtered(found[:, 0].astype(np.int64), found[:, 1].astype(np.int64), self._pos, self.radii)
