@@ -23,6 +23,7 @@ changed cell).
 
 from __future__ import annotations
 
+import csv
 import gc
 import sys
 import time
@@ -37,9 +38,10 @@ from own.parallel import threading_layer, threads
 from scenes.generate import at_essay_density
 from scenes.motion import Trajectory, simulate
 
-from .lib.cli import CliError, Parser, run_cli
+from .lib.cli import CliError, Parser, command_line, run_cli
 from .lib.harness import Job, run_isolated
 from .lib.options import add_quick_option, parse_checked
+from .lib.output import Output
 
 # The targets, ms per frame (update + pairs) on a 2-core machine of this kind, for the fastest of
 # our backends: (one thread, both cores); None where there is none (at n = 2048 handing work to a
@@ -156,7 +158,7 @@ def ms_without(backend: str, traj: Trajectory, seconds: float, used: bool, **par
     return f"{tight_loop(backend, traj, seconds, **params)[0]:.4f}" if used else "-"
 
 
-def print_targets(trajectories, seconds: float) -> None:
+def print_targets(trajectories, seconds: float, table: "Table") -> None:
     print(f"Parallel variants run on {threads()} threads ({threading_layer()} threading layer). 'general ms': the same "
           f"backend with its general kernels, where it left out a part the scene does not need (specialise=False). "
           f"'scalar ms': the same backend scanning one slot at a time, where it scanned 8 at a time (vector=False).")
@@ -184,12 +186,15 @@ def print_targets(trajectories, seconds: float) -> None:
             left_out = any(key.startswith("left_out_") for key in last)
             best[used] = min(best[used], (fastest, pick))
             per_pair = f"{fastest * 1e6 / pairs:.1f}" if pairs else "-"
-            print(f"{n:>9} {dist:<9} {family:<13} {pick:<20} {used:>7} {fastest:>12.4f} "
-                  f"{ms_without(pick, traj, seconds, left_out, specialise=False):>11} "
-                  f"{ms_without(pick, traj, seconds, bool(last.get('vector')), vector=False):>10} "
-                  f"{floor:>9.4f} {fastest / floor:>7.1f}x "
-                  f"{per_pair:>8} {median:>15.4f} {harness_ms(pick, traj):>14.4f} "
-                  f"{tight_loop(pick, in_space, seconds)[0]:>17.4f}")
+            row = {"n": n, "dist": dist, "backend": family, "variant": pick, "threads": used, "measured_ms": fastest,
+                   "general_ms": ms_without(pick, traj, seconds, left_out, specialise=False),
+                   "scalar_ms": ms_without(pick, traj, seconds, bool(last.get("vector")), vector=False),
+                   "floor_ms": floor, "x_floor": fastest / floor, "ns_per_pair": per_pair, "median_pass_ms": median,
+                   "in_harness_ms": harness_ms(pick, traj), "spatial_order_ms": tight_loop(pick, in_space, seconds)[0]}
+            table.add(row)
+            print(f"{n:>9} {dist:<9} {family:<13} {pick:<20} {used:>7} {fastest:>12.4f} {row['general_ms']:>11} "
+                  f"{row['scalar_ms']:>10} {floor:>9.4f} {fastest / floor:>7.1f}x {per_pair:>8} {median:>15.4f} "
+                  f"{row['in_harness_ms']:>14.4f} {row['spatial_order_ms']:>17.4f}")
             sys.stdout.flush()
         # On every core the parallel variant or a single-thread one counts, whichever is faster.
         for label, target, (fastest, pick) in (("one thread", one, best[1]),
@@ -203,9 +208,10 @@ def print_targets(trajectories, seconds: float) -> None:
     print("\nTargets (fastest pass of the fastest of our backends):")
     for line in verdicts:
         print("  " + line)
+    table.meta(targets=verdicts)
 
 
-def print_coherence(trajectories, seconds: float) -> None:
+def print_coherence(trajectories, seconds: float, table: "Table") -> None:
     """Each of COHERENCE's backends from scratch and coherent, side by side in one run, with the
     repair's work: frames it repaired (the others it sorted afresh, as -1 swaps say), the median
     rows or entries its insertion sort moved in those, and for the grid the objects that changed cell."""
@@ -219,6 +225,9 @@ def print_coherence(trajectories, seconds: float) -> None:
             swaps = [c["swaps"] for c in counters if c["swaps"] >= 0]
             moved_by_repair = f"{np.median(swaps):.0f}" if swaps else "-"
             changed_cell = f"{np.median([c['moved'] for c in counters]):.0f}" if "moved" in counters[0] else "-"
+            table.add({"n": n, "backend": backend, "scratch_ms": scratch_ms, "coherent_ms": coherent_ms,
+                       "repaired_frames": len(swaps), "frames": frames, "moved_by_repair": moved_by_repair,
+                       "changed_cell": changed_cell})
             print(f"{n:>9} {backend:<14} {scratch_ms:>16.3f} {coherent_ms:>12.3f} {scratch_ms / coherent_ms:>16.2f}x "
                   f"{f'{len(swaps)}/{frames}':>16} {moved_by_repair:>16} {changed_cell:>13}")
             sys.stdout.flush()
@@ -234,7 +243,28 @@ def parser() -> Parser:
                         f"pass counts (default {SECONDS})")
     p.add_argument("--coherence", action="store_true",
                    help="time each sorted structure from scratch against repaired from last frame's order")
+    p.add_argument("--out", metavar="DIR", help="output folder (default results/bench-<date>-<time>): bench.csv, "
+                                                "a row per line printed, written as each is measured, and meta.json")
     return p
+
+
+class Table:
+    """bench.csv in the output folder, a row appended (and flushed) as each is measured, so an
+    interrupted run keeps what it printed; meta.json beside it."""
+
+    def __init__(self, out: Output) -> None:
+        self.out, self.path, self._columns = out, out.path / "bench.csv", None
+
+    def add(self, row: dict) -> None:
+        with open(self.path, "a" if self._columns else "w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=list(row))
+            if self._columns is None:
+                writer.writeheader()
+                self._columns = list(row)
+            writer.writerow(row)
+
+    def meta(self, **fields) -> None:
+        self.out.meta(**fields)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -243,11 +273,15 @@ def main(argv: list[str] | None = None) -> int:
         raise CliError("--seconds must be a finite number >= 0")
     scenes = [("uniform", 2048)] if args.quick else \
         [("uniform", n) for n in TARGETS_MS] + [("clusters", n) for n in CLUSTERED_FLOOR_MULTIPLE]
-    if args.coherence:
-        sizes = [2048] if args.quick else [n for n in TARGETS_MS if n not in SMALL]
-        print_coherence((_trajectory("uniform", n, args.frames) for n in sizes), args.seconds)
-    else:
-        print_targets((_trajectory(dist, n, args.frames) for dist, n in scenes), args.seconds)
+    with Output(args.out, "bench", command_line("bench", argv)) as out:
+        table = Table(out)
+        out.meta(frames=args.frames, seconds=args.seconds, coherence=args.coherence)
+        if args.coherence:
+            sizes = [2048] if args.quick else [n for n in TARGETS_MS if n not in SMALL]
+            print_coherence((_trajectory("uniform", n, args.frames) for n in sizes), args.seconds, table)
+        else:
+            print_targets((_trajectory(dist, n, args.frames) for dist, n in scenes), args.seconds, table)
+    print(f"\nwrote {table.path} and {out.path / 'meta.json'}")
     return 0
 
 

@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
         start = time.perf_counter()
         traj = runner.trajectory(scene, args.frames + 1)  # frame 0 is every backend's warm-up
         print(f"scene {scene.name}: n={scene.n}, radii {scene.radius_range[0]:g}..{scene.radius_range[1]:g}, "
-              f"box {scene.box} ({coverage(scene.radii, scene.box):.0%} of it covered by the objects' boxes), "
+              f"box {scene.box} (the objects' boxes cover {coverage(scene.radii, scene.box):.0%} of it), "
               f"{args.frames} timed frames x {args.repeat} repeats (trajectory and exact pairs computed once in "
               f"{time.perf_counter() - start:.1f} s)")
         if scene.motion is not None:

@@ -21,7 +21,7 @@ from .lib.cli import CliError, Parser, command_line, run_cli, warn_unavailable
 from .lib.essay_plan import Plan, Run, fixed_runs, grid_search_run
 from .lib.harness import Job
 from .lib.options import add_output_options, add_quick_option, add_trial_options, parse_checked
-from .lib.output import Output, docs_folder, read_meta
+from .lib.output import Output, read_meta, report_folder
 from .lib.pool import Pool
 from .lib.results import RowWriter
 from .lib.runner import Runner
@@ -87,13 +87,14 @@ def search_best_p(runner: Runner, n: int, backend: str, bar) -> int:
 
 def measure(runner: EssayRunner, plan: Plan) -> dict:
     runs = fixed_runs(plan)
-    with tqdm(total=len(runs), desc="essay study", unit="run", file=sys.stderr) as bar:
+    # The search's length is not known before it ends: it counts its runs on a bar of its own, so
+    # the study's bar has its true total from the start.
+    with tqdm(desc="essay study: the best grid size (experiment 3)", unit="run", file=sys.stderr) as bar:
         best_p = {(n, b): search_best_p(runner, n, b, bar) for n in plan.sizes for b in ("essay.grid", "own.grid")}
-        # Experiment 4 runs the essay's grid at the optimum p that experiment 3 found for each n.
-        runs += [Run("4", "essay.grid", (("p", best_p[(n, "essay.grid")]),), n=n, radius=r)
-                 for n in plan.sizes for r in plan.radii]
-        bar.total = bar.n + len(runs)
-        bar.refresh()
+    # Experiment 4 runs the essay's grid at the optimum p that experiment 3 found for each n.
+    runs += [Run("4", "essay.grid", (("p", best_p[(n, "essay.grid")]),), n=n, radius=r)
+             for n in plan.sizes for r in plan.radii]
+    with tqdm(total=len(runs), desc="essay study", unit="run", file=sys.stderr) as bar:
         for run in sorted(runs, key=lambda r: (str(r.scene_key), r.experiment, r.backend)):
             bar.set_postfix_str(f"{run.experiment} {run.label} n={run.n}")
             runner.median(run)
@@ -119,7 +120,6 @@ def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     plan = Plan.make(args.quick)
     out = Path(args.out)
-    report_dir = Path(args.report_dir) if args.report_dir else (out if args.quick else docs_folder())
     if args.report_only:
         if not read_meta(out):
             raise CliError(f"no finished study in {out} (run python -m studies.essay first)")
@@ -127,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
         with Output(args.out, "essay", command_line("essay", argv), args.resume) as output:
             missing = warn_unavailable(plan.engines)
             writer = RowWriter(output.path, args.resume)
-            output.meta(plan=vars(plan), unavailable=missing)
+            output.meta(plan=vars(plan), unavailable=missing, full=not args.quick)
             with Runner(writer, output, pool=Pool.from_args(args)) as jobs:
                 runner = EssayRunner(jobs, plan, args)
                 best_p = measure(runner, plan)
@@ -135,7 +135,9 @@ def main(argv: list[str] | None = None) -> int:
             output.meta(best_p=best_p, outcomes={k: v for k, v in runner.outcomes.items() if v != "ok"})
     from .lib.essay_report import write_report
 
-    report = write_report(out, report_dir, read_meta(out))
+    meta = read_meta(out)
+    report_dir = report_folder(args, out, meta)
+    report = write_report(out, report_dir, meta)
     print(f"wrote {out / 'results.csv'}, {report} and its figures in {report_dir / 'figures'}")
     return 0
 

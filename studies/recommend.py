@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import engines
+from engines.knobs import frames_needed
 from scenes.costs import costs
 
 from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli, warn_unavailable
@@ -38,8 +39,10 @@ HOPELESS = 20.0
 # Tune only backends within this factor of the leader's default time (tuning rarely gains more).
 TUNE_WITHIN = 3.0
 TUNE_FRAMES = 3  # frames per point of the tuning sweep (one repeat)
+TUNE_SHARE = 0.2  # of the time limit, kept for tuning (the trials of every backend have the rest)
 REPORT_S = 3.0  # of the time limit, kept for writing the report and figure
 DEFAULT_FRAMES, DEFAULT_REPEATS = 20, 3
+MIN_FRAMES = 5  # per repeat, before a trial gives up a repeat for more frames
 # Of the time limit: at most this share for stepping the scene and its exact pairs, and for
 # checking every backend's pairs against them (the rest is for the trials themselves).
 TRAJECTORY_SHARE = 0.25
@@ -71,7 +74,7 @@ def verified_frames(frames: int, pairs: float, backends: int, time_limit: float)
 def run_order(names: list[str]) -> list[str]:
     """Ours first (fast: they set the bar that stops hopeless ones early), then the engines and
     libraries, the pure-Python methods, and our brute force (quadratic) last."""
-    rank = {"own": 0, "engine": 1, "library": 1, "essay": 2}
+    rank = {"own": 0, "engine": 1, "particle": 1, "library": 1, "essay": 2}
 
     def place(name: str) -> int:
         if engines.of_kind(name, "own") and engines.backend_class(name).method == "brute":
@@ -89,6 +92,8 @@ class Entry:
     note: str = ""
     job: str = ""  # the key of the job behind the trial, in the results
     max_error: float = 0.0  # the share of contacts it may miss and still be recommended
+    defaults: Trial | None = None  # the defaults' trial, where a tuned setting replaced it
+    inexact: Trial | None = None  # the fastest setting tuning found that misses contacts (within max_error)
 
     @property
     def eligible(self) -> bool:
@@ -108,9 +113,12 @@ def rank(entries: list[Entry]) -> list[list[Entry]]:
     return groups
 
 
-def params_text(entry: Entry) -> str:
-    params = entry.trial.params
+def params_words(params: dict) -> str:
     return ", ".join(f"{k}={v}" for k, v in params.items()) if params else "defaults"
+
+
+def params_text(entry: Entry) -> str:
+    return params_words(entry.trial.params)
 
 
 def verdict(groups: list[list[Entry]], entries: list[Entry], traits: Traits) -> list[str]:
@@ -122,10 +130,8 @@ def verdict(groups: list[list[Entry]], entries: list[Entry], traits: Traits) -> 
     win = top[0]
     lines.append(f"Use {win.backend} ({params_text(win)}): {win.trial.median_ms:.3g} ms per frame "
                  f"(repeats {win.trial.low_ms:.3g} to {win.trial.high_ms:.3g}).")
-    if win.trial.error > 0:
-        lines.append(f"It gives up {win.trial.error:.2g} of the contacts ({win.trial.contacts_missed} of "
-                     f"{win.trial.contacts} missed over {win.trial.frames} frames), within the --max-error "
-                     f"of {win.max_error:g} you allowed.")
+    if win.max_error > 0:
+        lines.append(allowance(win, entries))
     if len(top) > 1:
         others = ", ".join(f"{e.backend} ({e.trial.median_ms:.3g} ms)" for e in top[1:])
         lines.append(f"Tied with it within the run-to-run spread: {others}; any of them will do.")
@@ -140,6 +146,27 @@ def verdict(groups: list[list[Entry]], entries: list[Entry], traits: Traits) -> 
         lines.append("Never recommended, missed pairs: " + ", ".join(f"{e.backend} ({e.trial.missed} missed)"
                                                                   for e in flagged) + ".")
     return lines
+
+
+def allowance(win: Entry, entries: list[Entry]) -> str:
+    """What the --max-error allowance bought: the winner's error against the fastest exact
+    setting measured, or that nothing inexact was faster."""
+    t = win.trial
+    if t.error > 0:
+        exact = [x for e in entries for x in (e.trial, e.defaults) if x is not None and x.acceptable(0.0)]
+        fastest = min(exact, key=lambda x: x.median_ms, default=None)
+        bought = (f" Allowing it bought {fastest.median_ms / t.median_ms:.2g}x: the fastest exact setting measured, "
+                  f"{fastest.backend} ({params_words(fastest.params)}), takes {fastest.median_ms:.3g} ms."
+                  if fastest is not None else " No exact setting finished to compare it with.")
+        return (f"It gives up {t.error:.2g} of the contacts ({t.contacts_missed} of {t.contacts} missed over "
+                f"{t.frames} frames), within the --max-error of {win.max_error:g} you allowed." + bought)
+    inexact = min((e.inexact for e in entries if e.inexact is not None), key=lambda x: x.median_ms, default=None)
+    if inexact is None:
+        return (f"The --max-error of {win.max_error:g} bought nothing here: no setting that misses contacts "
+                "within it was measured (tuning tries them on the backends that could still win).")
+    return (f"The --max-error of {win.max_error:g} bought nothing here: the fastest setting that misses contacts, "
+            f"{inexact.backend} ({params_words(inexact.params)}, {inexact.error:.2g} missed), took "
+            f"{inexact.median_ms:.3g} ms, no faster than this exact one.")
 
 
 def nothing_finished(entries: list[Entry]) -> str:
@@ -185,26 +212,49 @@ def why(win: Entry, runner: Entry | None, traits: Traits) -> str:
 
 
 def plot(entries: list[Entry], groups: list[list[Entry]], path: Path, title: str) -> None:
-    shown = sorted((e for e in entries if e.trial.ok), key=lambda e: e.trial.median_ms)
+    """Every backend tried, fastest first: a point at its median time per frame on a log axis with
+    its spread over repeats as a line, the winner's group filled; one stopped before finishing a
+    trial is a hollow grey point at its one frame (where it finished one), named with why."""
+    finished = sorted((e for e in entries if e.trial.ok), key=lambda e: e.trial.median_ms)
+    stopped = sorted((e for e in entries if not e.trial.ok), key=lambda e: (e.trial.frame_ms != e.trial.frame_ms,
+                                                                            e.trial.frame_ms))
+    shown = finished + stopped
     if not shown:  # the file the report names exists, and says why it is empty
         fig = new_figure(figsize=(7, 2))
-        fig.text(0.5, 0.5, "No backend finished a frame: nothing to draw", ha="center", va="center")
+        fig.text(0.5, 0.5, "No backend was tried: nothing to draw", ha="center", va="center")
         save(fig, path)
         return
     top = {id(e) for e in (groups[0] if groups else [])}
-    fig = new_figure(figsize=(7, 0.35 * len(shown) + 1.5))
+    fig = new_figure(figsize=(8, 0.22 * len(shown) + 1.6))
     ax = fig.subplots()
+    times = [e.trial.low_ms for e in finished] + [e.trial.high_ms for e in finished] + \
+        [e.trial.frame_ms for e in stopped if e.trial.frame_ms > 0]
+    labels = []
     for y, e in enumerate(shown):
-        colour = "tab:red" if e.trial.missed else backend_colour(e.backend)
         t = e.trial
-        ax.barh(y, t.median_ms, color=colour, alpha=0.9 if id(e) in top else 0.5)
-        ax.errorbar(t.median_ms, y, xerr=[[t.median_ms - t.low_ms], [t.high_ms - t.median_ms]], color="k", capsize=2)
-        label = e.backend + (" (tuned)" if e.tuned else "") + (" MISSED PAIRS" if e.trial.missed else "")
-        ax.text(t.high_ms * 1.05, y, label, va="center", fontsize=7)
-    ax.set_yticks([])
+        colour = "tab:red" if t.ok and not e.eligible else backend_colour(e.backend)
+        label = e.backend + (" (tuned)" if e.tuned else "")
+        if t.ok:
+            ax.plot([t.low_ms, t.high_ms], [y, y], color=colour, lw=2, solid_capstyle="butt")
+            ax.plot(t.median_ms, y, "o", color=colour, ms=6, mfc=colour if id(e) in top else "white")
+            label += f"  {t.median_ms:.3g} ms" + ("  MISSED PAIRS" if t.missed and not e.eligible else "")
+        elif t.frame_ms > 0:
+            ax.plot(t.frame_ms, y, "o", color="grey", ms=6, mfc="none")
+            label += f"  {t.status.split(':')[0]} after one frame"
+        else:
+            label += f"  {t.status.split(':')[0]}"
+        labels.append(label)
+    ax.set_yticks(range(len(shown)), labels, fontsize=7)
+    for tick, e in zip(ax.get_yticklabels(), shown):
+        tick.set_color("black" if e.trial.ok else "grey")
+    ax.set_ylim(len(shown) - 0.5, -0.5)
     ax.set_xscale("log")
-    ax.invert_yaxis()
-    ax.set_xlabel("ms per frame, end to end (bar: median; whisker: fastest to slowest repeat)")
+    if times:
+        ax.set_xlim(min(times) / 2, max(times) * 2)
+    ax.grid(axis="x", which="both", alpha=0.3)
+    ax.set_xlabel("ms per frame, end to end (point: median; line: fastest to slowest repeat;\n"
+                  "filled: the winner and its ties; hollow grey: the one frame of a backend stopped after it)",
+                  fontsize=8)
     ax.set_title(title, fontsize=9)
     save(fig, path)
 
@@ -275,6 +325,22 @@ class Trials:
             trial.status = f"stopped: not done within its {job.timeout_s:.0f} s share of the time limit"
         return trial
 
+    def trial_size(self, probe: Trial, probe_s: float, share: int) -> tuple[int, int]:
+        """(frames, repeats) that fit twice this backend's share of the time left, from its probe:
+        a job's fixed cost (the child, its build: the probe's wall time less its frame), then per
+        repeat a build anew and the frames. Repeats come first, down to MIN_FRAMES frames each:
+        without two there is no spread, and no tie can be told from a win."""
+        frame_s = probe.median_ms / 1e3 + probe.contacts * CHECK_S_PER_PAIR  # its pairs are checked too
+        fixed_s = max(probe_s - frame_s, 0.0)
+        room = 2 * (self.deadline - time.perf_counter()) / share - fixed_s
+        rebuild_s = min(probe.setup_s, fixed_s) if probe.setup_s == probe.setup_s else fixed_s  # an upper bound:
+        # the probe's build paid for loading compiled code too
+        for repeats in range(self.repeats, 0, -1):
+            frames = min(self.frames, int((room / repeats - rebuild_s) / max(frame_s, 1e-6)))
+            if frames >= min(MIN_FRAMES, self.frames):
+                return frames, repeats
+        return max(frames, 1), 1
+
     def sized(self, backend: str, budget: float, share: int) -> "Entry":
         """One frame first (a valid trial when that is all that fits), then as many frames and
         repeats as its share of the time left allows, up to the plan's."""
@@ -283,11 +349,7 @@ class Trials:
         probe = self.run(probe_job)
         if not probe.ok or (self.frames == 1 and self.repeats == 1):
             return Entry(backend, probe, job=probe_job.key, max_error=self.max_error)
-        per_frame = max((time.perf_counter() - started) - probe.setup_s, probe.median_ms / 1e3, 1e-6)
-        left = self.deadline - time.perf_counter()
-        room = max(0.0, 2 * left / share - probe.setup_s)  # a repeat builds the backend anew
-        frames = min(self.frames, max(1, int(room / per_frame)))
-        repeats = min(self.repeats, max(1, int(room / (frames * per_frame + probe.setup_s))))
+        frames, repeats = self.trial_size(probe, time.perf_counter() - started, share)
         if frames * repeats <= 1:
             return Entry(backend, probe, job=probe_job.key, note="one frame: no more fitted its share of the time",
                          max_error=self.max_error)
@@ -310,6 +372,8 @@ def main(argv: list[str] | None = None) -> int:
         backends = run_order([b for b in chosen if b not in missing])
         start = time.perf_counter()
         deadline = start + args.time_limit - REPORT_S
+        # The trials leave TUNE_SHARE of the time to tuning, which can still change the winner.
+        trials_deadline = deadline if args.no_tune else start + (1 - TUNE_SHARE) * (args.time_limit - REPORT_S)
         writer = RowWriter(out.path, args.resume)
         runner = Runner(writer, out, pool=Pool.from_args(args))
         frames, repeats, notes, verify = plan_trials(runner, scene, args, len(backends))
@@ -318,11 +382,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"scene {scene.name}: {', '.join(traits.words())}")
         for note in notes:
             print(note, flush=True)
-        trials = Trials(runner, scene, frames, repeats, deadline, args, verify)
+        trials = Trials(runner, scene, frames, repeats, trials_deadline, args, verify)
         entries: list[Entry] = []
         skipped: list[str] = []
         for k, backend in enumerate(backends):
-            if time.perf_counter() > deadline:
+            if time.perf_counter() > trials_deadline:
                 skipped.append(backend)
                 continue
             warm_up(backend)
@@ -342,8 +406,9 @@ def main(argv: list[str] | None = None) -> int:
                         verified=list(verify) if verify else None, time_limit=args.time_limit,
                         max_error=args.max_error,
                         unavailable=missing, not_tried=skipped, notes=notes,
-                        entries=[{"backend": e.backend, "job": e.job, "tuned": e.tuned, "note": e.note}
-                                 for e in entries])
+                        entries=[{"backend": e.backend, "job": e.job, "tuned": e.tuned, "note": e.note,
+                                  "defaults_job": e.defaults.key if e.defaults else None,
+                                  "inexact_job": e.inexact.key if e.inexact else None} for e in entries])
     finish(out.path, entries, meta, Traits(**meta["traits"]))
     print(f"({time.perf_counter() - start:.0f} s)")
     return 0
@@ -401,19 +466,29 @@ def report_only(folder: Path) -> int:
     meta, stored = read_meta(folder), stored_runs(folder)
     if "entries" not in meta:
         raise CliError(f"{folder} holds no finished recommendation (meta.json lists no trials)")
-    entries = []
-    for e in meta["entries"]:
-        job = Job(e["backend"], json.loads(e["job"])["params"])
-        rows = stored.get(e["job"], [])
-        outcome = Outcome(e["backend"], rows[-1]["status"] if rows else "not measured", rows)
-        entries.append(Entry(e["backend"], Trial.of(job, outcome), e["tuned"], e["note"],
-                             max_error=meta.get("max_error", 0.0)))
+    def trial(key: str | None) -> Trial | None:
+        if not key:
+            return None
+        rows = stored.get(key, [])
+        job = Job(json.loads(key)["backend"], json.loads(key)["params"])
+        return Trial.of(job, Outcome(job.backend, rows[-1]["status"] if rows else "not measured", rows))
+
+    entries = [Entry(e["backend"], trial(e["job"]), e["tuned"], e["note"], job=e["job"],
+                     max_error=meta.get("max_error", 0.0), defaults=trial(e.get("defaults_job")),
+                     inexact=trial(e.get("inexact_job"))) for e in meta["entries"]]
     finish(folder, entries, meta, Traits(**meta["traits"]))
     return 0
 
 
+def fastest_inexact(found, max_error: float) -> Trial | None:
+    """The fastest point of a tuning sweep that missed contacts, within the error allowed."""
+    points = [t for sweep in found.sweeps for _, t in sweep.points if t.acceptable(max_error) and t.error > 0]
+    return min(points, key=lambda t: t.median_ms, default=None)
+
+
 def tune(entries: list[Entry], trials: Trials, deadline: float) -> None:
     """Tune the backends with knobs that could still win, then re-measure the tuned setting."""
+    trials.deadline = deadline  # the time the trials left is tuning's
     eligible = sorted((e for e in entries if e.eligible and tunable([e.backend])), key=lambda e: e.trial.median_ms)
     leader = min((e.trial.median_ms for e in entries if e.eligible), default=float("inf"))
     for e in eligible:
@@ -425,21 +500,30 @@ def tune(entries: list[Entry], trials: Trials, deadline: float) -> None:
             continue
 
         def measure(params, step, backend=e.backend):
-            return trials.run(trials.job(backend, params, f"tuning {step}", repeats=1, frames=TUNE_FRAMES,
+            frames = max(TUNE_FRAMES, frames_needed(engines.backend_class(backend).sweeps, params))
+            return trials.run(trials.job(backend, params, f"tuning {step}", repeats=1, frames=frames,
                                          budget=HOPELESS * leader / 1e3))
 
-        found = tune_backend(trials.scene, e.backend, measure, with_default=False, max_error=e.max_error)
+        found = tune_backend(trials.scene, e.backend, measure, with_default=False, max_error=e.max_error,
+                             max_period=trials.frames)
+        e.inexact = fastest_inexact(found, e.max_error)
         defaults = engines.backend_class(e.backend).defaults
         same = all(defaults.get(k) == v for k, v in found.params.items())
-        if not found.params or same or time.perf_counter() > deadline:
+        if not found.params or same:
             e.note = "defaults were best" if found.params else "tuning found no better setting"
+            continue
+        if time.perf_counter() > deadline:
+            e.note = "tuned, but the time limit came before its setting was measured again"
             continue
         job = trials.job(e.backend, found.params, "tuned")
         tuned = trials.run(job)
         setting = ", ".join(f"{k}={v}" for k, v in found.params.items())
+        if tuned.acceptable(e.max_error) and tuned.error > 0:
+            e.inexact = tuned
         # Adopted only when faster beyond the run-to-run spread: otherwise the defaults stand.
         if tuned.acceptable(e.max_error) and tuned.high_ms < e.trial.low_ms:
             e.note = f"tuned; defaults took {e.trial.median_ms:.3g} ms"
+            e.defaults = e.trial
             e.trial, e.tuned, e.job = tuned, True, job.key
         elif tuned.acceptable(e.max_error) and tuned.overlaps(e.trial):
             e.note = f"tuned setting ({setting}, {tuned.median_ms:.3g} ms) within the spread of the defaults"

@@ -2,8 +2,8 @@
 
 Scenes keep the essay's density (r = 10, the box side scaled by sqrt(n / 2048)), uniform and
 clustered. Each backend is measured in a child process at doubling n until one frame exceeds the
-budget. Writes results.csv (compare's columns plus the distribution), scale.png (log-log, with
-the fitted growth exponent of each backend in the legend) and prints the exponents, peak memory
+budget. Writes results.csv (compare's columns plus the distribution), scale.png (log-log, a panel per
+distribution and kind of backend) and prints each one's fitted growth exponent, peak memory
 and the numba compile time with a cold and a warm cache. A full run (every backend up to 2^20)
 also writes docs/SCALE.md, with our fastest backend against the fastest engine at each n.
 """
@@ -25,7 +25,7 @@ from scenes import SCENE_KINDS
 from scenes.generate import at_essay_density
 
 from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli, warn_unavailable
-from .lib.figures import new_figure, save
+from .lib.figures import backend_colour, new_figure, save
 from .lib.harness import Job
 from .lib.options import (add_backends_option, add_output_options, add_quick_option, add_trial_options,
                           parse_checked)
@@ -92,24 +92,58 @@ def growth_exponent(d: pd.DataFrame) -> float:
     return float(np.polyfit(np.log(d.n), np.log(d.ms), 1)[0])
 
 
+# scale.png's columns: small multiples by kind of backend, so that no panel holds more lines than
+# its legend can name; our fastest on one thread is drawn in every other panel for reference.
+PANELS = [("ours", ("own",)), ("physics engines", ("engine",)),
+          ("neighbour lists and libraries", ("particle", "library")), ("the essay's Python", ("essay",))]
+LINE_STYLES = ["-", "--", "-.", ":"]
+MARKERS = ["o", "s", "^", "v", "D", "P", "X"]
+
+
+def line_style(backend: str) -> dict:
+    """One colour per family (shaded per variant); the variants told apart by line style and marker too."""
+    family = backend.split(".")[0]
+    same = [n for n in engines.names() if n.split(".")[0] == family]
+    k = same.index(backend) if backend in same else 0
+    return {"color": backend_colour(backend), "ls": LINE_STYLES[k % len(LINE_STYLES)], "marker": MARKERS[k % len(MARKERS)]}
+
+
 def figure(medians: pd.DataFrame, path: Path) -> dict[tuple[str, str], float]:
-    exponents = {}
+    """scale.png: a row per distribution, a column per kind of backend (PANELS); returns each
+    backend's growth exponent per distribution (the report lists them)."""
+    exponents = {(dist, backend): growth_exponent(d) for (dist, backend), d in medians.groupby(["dist", "backend"])}
     dists = list(dict.fromkeys(medians.dist))
-    fig = new_figure(figsize=(7 * len(dists), 5.5))
-    axes = fig.subplots(1, len(dists), sharey=True)
-    for ax, dist in zip(np.atleast_1d(axes), dists):
-        for backend, d in medians[medians.dist == dist].groupby("backend", sort=False):
-            k = exponents[(dist, backend)] = growth_exponent(d)
-            ax.plot(d.n, d.ms, "-o", ms=3, lw=1.2, label=f"{backend} (n^{k:.2f})")
-        ax.set_xscale("log", base=2)
-        ax.set_yscale("log")
-        ax.set_xlabel("n (essay density, r = 10)")
-        ax.set_ylabel("median time per frame: update + pairs + narrow (ms)")
-        ax.set_title(dist, fontsize=10)
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7, loc="upper left")
+    kinds = {b: engines.family(b).kind for b in medians.backend.unique()}
+    panels = [(title, k) for title, k in PANELS if any(kind in k for kind in kinds.values())]
+    fig = new_figure(figsize=(5.2 * len(panels), 4.2 * len(dists) + 3.2))
+    axes = np.atleast_2d(fig.subplots(len(dists), len(panels), sharex=True, sharey=True, squeeze=False))
+    for row, dist in enumerate(dists):
+        here = medians[medians.dist == dist]
+        ours = ours_fastest(here)
+        for col, (title, kind) in enumerate(panels):
+            ax = axes[row, col]
+            for backend, d in here.groupby("backend", sort=False):
+                if kinds[backend] in kind:
+                    ax.plot(d.n, d.ms, ms=3, lw=1.1, label=backend, **line_style(backend))
+            if "own" not in kind and len(ours):
+                ax.plot(ours.n, ours.ms, color="0.3", lw=3, alpha=0.35, label="our fastest, one thread")
+            ax.set_xscale("log", base=2)
+            ax.set_yscale("log")
+            ax.set_title(f"{title}: {dist}", fontsize=9)
+            ax.grid(True, which="both", alpha=0.3)
+            if col == 0:
+                ax.set_ylabel("ms per frame: update + pairs + narrow")
+            if row == len(dists) - 1:
+                ax.set_xlabel("n (essay density, r = 10)")
+                ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=2, frameon=False)
     save(fig, path)
     return exponents
+
+
+def ours_fastest(medians: pd.DataFrame) -> pd.DataFrame:
+    """Per n, the fastest of our backends on one thread (n, ms)."""
+    ours = medians[[engines.of_kind(b, "own") and not engines.uses_every_core(b) for b in medians.backend]]
+    return ours.loc[ours.groupby("n").ms.idxmin(), ["n", "ms"]].sort_values("n") if len(ours) else ours
 
 
 VERSUS = ["dist", "n", "ours", "ours_ms", "engine", "engine_ms", "ratio", "timed_engine", "engine_bp_ms",

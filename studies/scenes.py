@@ -22,7 +22,7 @@ from scenes.generate import at_essay_density
 from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli, warn_unavailable
 from .lib.harness import Job
 from .lib.options import add_backends_option, add_output_options, add_quick_option, add_trial_options, parse_checked
-from .lib.output import Output, docs_folder, read_meta
+from .lib.output import Output, read_meta, report_folder
 from .lib.pool import Pool
 from .lib.results import RowWriter, missed_total, ok_lines, read_rows, summarise
 from .lib.runner import Runner
@@ -65,9 +65,8 @@ def parse(argv: list[str] | None):
 
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
-    report_dir = Path(args.report_dir) if args.report_dir else None
     if args.report_only:
-        return report(Path(args.out), report_dir or (Path(args.out) if args.quick else docs_folder()))
+        return report(Path(args.out), report_folder(args, Path(args.out), read_meta(Path(args.out))))
     chosen = matched_backends(args.backends)
     command = command_line("scenes", argv)
     # Every command that measured rows here: a resumed run may add sizes or backends.
@@ -77,7 +76,8 @@ def main(argv: list[str] | None = None) -> int:
         runnable = [b for b in chosen if b not in unavailable]
         writer = RowWriter(out.path, args.resume)
         runner = Runner(writer, out, pool=Pool.from_args(args))
-        out.meta(families=args.family_list, sizes=args.size_list, frames=args.frames, repeats=args.repeat,
+        out.meta(full=not args.quick, families=args.family_list, sizes=args.size_list, frames=args.frames,
+                 repeats=args.repeat,
                  unavailable=unavailable, commands=commands)
         jobs = []
         for family in args.family_list:
@@ -89,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
         with runner:
             runner.run_all(jobs, desc="scene families x backends")
         writer.finish()
-    return report(out.path, report_dir or (out.path if args.quick else docs_folder()))
+    return report(out.path, report_folder(args, out.path))
 
 
 def family_tables(rows: pd.DataFrame) -> dict[tuple[str, int], pd.DataFrame]:

@@ -17,7 +17,7 @@ from own.small import SmallScenes
 from scenes.motion import simulate
 
 from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli
-from .lib.drawing import draw_frame, new_figure
+from .lib.drawing import draw_frame, new_figure, relayout
 from .lib.options import add_backends_option, add_scene_options, parse_checked, scene_from_args
 from .lib.output import Output
 
@@ -82,6 +82,7 @@ class Stepper:
                             must, f"{label}{shown}, frame {f}", alive=traj.alive_at(f), static=traj.scene.static)
         fig.axes[0].set_title(fig.axes[0].get_title() + f"\n{counts['candidates']} candidates, "
                               f"{counts['overlaps']} true overlaps found, {counts['missed']} missed", fontsize=9)
+        relayout(fig)  # the title has a second line now
         return counts
 
 

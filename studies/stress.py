@@ -30,13 +30,16 @@ from .lib.figures import new_figure, save
 from .lib.harness import Job
 from .lib.options import (add_backends_option, add_output_options, add_quick_option, add_scene_file_option,
                           add_trial_options, file_scene, parse_checked)
-from .lib.output import Output, docs_folder, read_meta
+from .lib.output import Output, read_meta, report_folder
 from .lib.pool import Pool
 from .lib.results import RowWriter, missed_total, read_rows, summarise
 from .lib.runner import Runner
 
 OUTCOMES = ["exact", "extra candidates", "missed", "invalid output", "error", "crashed", "timed out", "skipped"]
 OUTCOME_COLOURS = ["#2ca02c", "#98df8a", "#d62728", "#9467bd", "#ff7f0e", "#000000", "#7f7f7f", "#dddddd"]
+# --quick's scenes: one of each way a backend breaks (touching, far from the origin, radius 0,
+# tunneling), so that a smoke run of every backend ends within two minutes.
+QUICK_SCENES = ("lattice_square", "shift_1e9", "radius_zero", "fast_movers")
 SCENES, LARGEST_N = "scenes", "largest n"  # the study's two experiments, as its rows name them
 
 
@@ -104,7 +107,8 @@ def heat_map(outcomes: pd.DataFrame, path: Path) -> None:
     table = outcomes.pivot(index="backend", columns="scene", values="outcome")
     table = table.reindex(columns=list(dict.fromkeys(outcomes.scene)), index=list(dict.fromkeys(outcomes.backend)))
     codes = table.apply(lambda col: col.map(OUTCOMES.index)).to_numpy(dtype=float)
-    fig = new_figure(figsize=(1.0 + 0.55 * table.shape[1], 1.2 + 0.32 * table.shape[0]))
+    # Room for the backend names (left) and the legend (right) beside columns of a fixed width.
+    fig = new_figure(figsize=(4.5 + 0.55 * table.shape[1], 1.6 + 0.32 * table.shape[0]))
     ax = fig.subplots()
     ax.imshow(codes, cmap=ListedColormap(OUTCOME_COLOURS), vmin=-0.5, vmax=len(OUTCOMES) - 0.5, aspect="auto")
     ax.set_xticks(range(table.shape[1]), table.columns, rotation=60, ha="right", fontsize=8)
@@ -198,7 +202,8 @@ def parser() -> Parser:
     add_trial_options(p, frames=10, repeat=1, budget=0.5, timeout=60.0, memory=4096.0)
     p.add_argument("--max-n", type=int, default=1 << 18, help="cap of the largest-n search (default 2^18)")
     p.add_argument("--save-scenes", metavar="DIR", help="also write every stress scene as a scene file")
-    add_quick_option(p, "3 frames per scene, n capped at 4096", frames=3, max_n=4096)
+    add_quick_option(p, f"the scenes {', '.join(QUICK_SCENES)}, 3 frames each, the largest-n search at n = 1024 "
+                        "only", scenes=",".join(QUICK_SCENES), frames=3, max_n=1024)
     add_output_options(p, "stress", report_dir="docs/, or OUT with --quick")
     return p
 
@@ -255,13 +260,14 @@ def main(argv: list[str] | None = None) -> int:
     if args.report_only:
         out = Path(args.out)
         rows, _ = read_rows(out)
-        path = write_outputs(rows, out, read_meta(out), Path(args.report_dir) if args.report_dir else docs_folder())
+        meta = read_meta(out)
+        path = write_outputs(rows, out, meta, report_folder(args, out, meta))
         print(f"wrote {path}")
         return 0
     backends = matched_backends(args.backends)
     scenes = chosen_scenes(args)
     with Output(args.out, "stress", command_line("stress", argv), args.resume) as out:
-        report_dir = Path(args.report_dir) if args.report_dir else (out.path if args.quick else docs_folder())
+        report_dir = report_folder(args, out.path)
         if args.save_scenes:
             folder = Path(args.save_scenes)
             folder.mkdir(parents=True, exist_ok=True)
@@ -272,7 +278,7 @@ def main(argv: list[str] | None = None) -> int:
         writer = RowWriter(out.path, args.resume)
         runner = Runner(writer, out, pool=Pool.from_args(args))
         out.meta(frames=args.frames, timeout_s=args.timeout, memory_mb=args.memory, budget_s=args.budget,
-                 max_n=args.max_n, backends=backends, unavailable=missing)
+                 max_n=args.max_n, backends=backends, unavailable=missing, full=not args.quick)
         drift = {}
         with runner:
             for scene in scenes:  # a scene at a time: its trajectory is computed once, here

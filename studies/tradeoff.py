@@ -27,7 +27,7 @@ import engines
 from scenes import Scene, generate
 
 from .lib.cli import Parser, command_line, matched_backends, run_cli, warn_unavailable
-from .lib.figures import family_colour, new_figure, pareto_front
+from .lib.figures import backend_colour, new_figure, pareto_front
 from .lib.harness import Job
 from .lib.options import (add_backends_option, add_output_options, add_quick_option, add_scene_file_option,
                           add_trial_options, file_scene, parse_checked)
@@ -94,13 +94,33 @@ def fastest_at_levels(lines: pd.DataFrame) -> list[dict[str, Any]]:
     return out
 
 
+KNOB_MARKERS = ["o", "^", "s", "v", "D", "P", "X", "<", ">", "*", "h", "p", "d", "H", "8", "1", "2", "3", "4"]
+
+
+def knob_of(label: str) -> str:
+    """The knob a setting's label changes ("every=10" -> "every"), or "defaults"."""
+    return label.split("=")[0] if "=" in label else "defaults"
+
+
+def strip_height(backend: str, families: list[str]) -> float:
+    """Where an exact setting sits on the strip at zero: a height per family, so that families
+    that take the same time stay apart."""
+    k = families.index(engines.family(backend).name) if engines.family(backend).name in families else 0
+    return 0.1 + 0.8 * (k + 0.5) / max(len(families), 1)
+
+
 def figure(lines: pd.DataFrame, path: Path) -> Path:
     """Per scene, one above the other: error against time per frame, log-log, the frontier
-    drawn and labelled; exact settings on a strip at zero; colours by family, legend at the top."""
+    drawn and labelled; exact settings on a strip at zero, a height per family; colours by backend
+    (shades of its family's), markers by the knob changed, legend at the top."""
     names = list(dict.fromkeys(lines.scene))
-    fig = new_figure(figsize=(11, 4.2 * len(names)))
+    fig = new_figure(figsize=(11, 4.6 * len(names)))
     scenes_grid = fig.add_gridspec(len(names), 1, hspace=0.22)
     done = lines[np.isfinite(lines.ms.astype(float)) & lines.error.notna()]
+    families = list(dict.fromkeys(engines.family(b).name for b in done.backend)) if len(done) else []
+    knobs = list(dict.fromkeys(knob_of(label) for label in done.label)) if len(done) else []
+    knob_markers = {knob: KNOB_MARKERS[k % len(KNOB_MARKERS)]
+                    for k, knob in enumerate(dict.fromkeys(["defaults"] + knobs))}
     lo, hi = (done.ms.min() / 1.5, done.ms.max() * 1.5) if len(done) else (0.01, 1.0)
     for k, scene in enumerate(names):
         d = done[done.scene == scene]
@@ -108,8 +128,9 @@ def figure(lines: pd.DataFrame, path: Path) -> Path:
         top, bottom = fig.add_subplot(inner[0]), fig.add_subplot(inner[1])
         for ax, part in ((top, d[d.error > 0]), (bottom, d[d.error == 0])):
             for line in part.itertuples():
-                ax.scatter(line.ms, line.error if ax is top else 0.5, s=22, color=family_colour(line.backend),
-                           alpha=0.8, zorder=3, marker="o" if line.label == "defaults" else "^")
+                ax.scatter(line.ms, line.error if ax is top else strip_height(line.backend, families), s=22,
+                           color=backend_colour(line.backend), alpha=0.85, zorder=3,
+                           marker=knob_markers[knob_of(line.label)])
         front = frontier(d)
         inexact = front[front.error > 0]
         if len(inexact):
@@ -121,7 +142,8 @@ def figure(lines: pd.DataFrame, path: Path) -> Path:
             top.set_yticks([])
         for number, line in enumerate(front.itertuples()):
             ax = top if line.error > 0 else bottom
-            ax.annotate(f"{line.backend} {line.label}", (line.ms, line.error if line.error > 0 else 0.5),
+            ax.annotate(f"{line.backend} {line.label}",
+                        (line.ms, line.error if line.error > 0 else strip_height(line.backend, families)),
                         textcoords="offset points", xytext=(4, 4 if number % 2 else -9), fontsize=6)
         for ax in (top, bottom):
             ax.set_xscale("log")
@@ -136,12 +158,14 @@ def figure(lines: pd.DataFrame, path: Path) -> Path:
         bottom.set_ylim(0, 1)
         if k < len(names) - 1:
             bottom.set_xticklabels([])
-    bottom.set_xlabel("median time per frame, end to end (ms); o: defaults, ^: a knob changed")
-    families = list(dict.fromkeys(engines.family(b).name for b in done.backend)) if len(done) else []
+    bottom.set_xlabel("median time per frame, end to end (ms); colour: the backend (shades of its family's); "
+                      "marker: the knob changed")
     handles = [Line2D([], [], ls="", marker="o", color=engines.registry.FAMILIES[f].colour, label=f) for f in families]
-    fig.legend(handles=handles, loc="upper center", ncol=min(len(handles), 8), fontsize=7, frameon=False)
+    handles += [Line2D([], [], ls="", marker=knob_markers[k], color="0.3", label=k) for k in knob_markers]
+    fig.legend(handles=handles, loc="upper center", ncol=min(len(handles), 10), fontsize=7, frameon=False)
     height = fig.get_figheight()
-    fig.subplots_adjust(left=0.08, right=0.97, top=1 - 0.7 / height, bottom=0.5 / height)
+    rows = -(-len(handles) // min(len(handles), 10)) if handles else 0
+    fig.subplots_adjust(left=0.08, right=0.97, top=1 - (0.5 + 0.17 * rows) / height, bottom=0.5 / height)
     fig.savefig(path, dpi=110)
     return path
 

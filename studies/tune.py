@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import sys
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +23,7 @@ import numpy as np
 import pandas as pd
 
 import engines
+from engines.knobs import frames_needed
 from own.grid import GRID_CELL_FACTORS, MAX_CELLS_PER_OBJECT
 from own.verlet import SKIN_FACTORS
 from own.sap import SPARSE_PAIRS_PER_OBJECT
@@ -31,7 +34,7 @@ from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli, 
 from .lib.figures import new_figure, save
 from .lib.options import (add_backends_option, add_output_options, add_quick_option, add_scene_options,
                           add_trial_options, parse_checked, scene_from_args)
-from .lib.output import Output, docs_folder
+from .lib.output import Output, read_meta, report_folder
 from .lib.pool import Pool
 from .lib.results import RowWriter, read_rows, stored_runs, summarise
 from .lib.runner import Runner
@@ -66,9 +69,10 @@ def describe_result(t: Tuned) -> str:
     """One line: the optimum, the default and the default's loss."""
     if t.best is None:
         return f"{t.backend}: no setting finished without misses (default: {t.default.status})"
-    best = ", ".join(f"{k}={v}" for k, v in t.params.items())
-    line = f"{t.backend}: best {best}: {t.best.median_ms:.3f} ms per frame"
-    if t.default.ok:
+    line = f"{t.backend}: best {t.setting}: {t.best.median_ms:.3f} ms per frame"
+    if t.default_is_best:
+        line += " (no swept setting measured faster)"
+    elif t.default.ok:
         noise = " (within the run-to-run spread)" if t.default_within_noise else ""
         line += f"; default {t.default.median_ms:.3f} ms, {t.loss:+.0%} against the best{noise}"
     else:
@@ -141,7 +145,8 @@ def run_tune(runner: Runner, scene: Scene, backends: list[str], args, exact_only
         warm_up(backend)
 
         def measure(params, step, backend=backend):
-            return run_trial(runner, scene, backend, params, frames=args.frames, repeats=args.repeat,
+            frames = max(args.frames, frames_needed(engines.backend_class(backend).sweeps, params))
+            return run_trial(runner, scene, backend, params, frames=frames, repeats=args.repeat,
                              budget_s=args.budget, timeout_s=args.timeout,
                              tag={"experiment": step, "label": ", ".join(f"{k}={v}" for k, v in params.items())})
 
@@ -176,7 +181,7 @@ def families_report(runner: Runner, out: Path, report_dir: Path, args) -> None:
             print(f"{family}, n={n}:", flush=True)
             for t in run_tune(runner, scene, OWN, args, exact_only=True):
                 rows.append({"family": family, "n": n, "backend": t.backend,
-                             "best": ", ".join(f"{k}={v}" for k, v in t.params.items()),
+                             "best": t.setting,
                              "best_ms": t.best.median_ms if t.best else float("nan"),
                              "default_ms": t.default.median_ms, "loss": t.loss,
                              "within_noise": t.default_within_noise, "default_stats": t.default.last_stats})
@@ -295,7 +300,7 @@ def parser() -> Parser:
                    help="check our own backends' default rules over the scene families and write TUNING.md")
     add_trial_options(p, frames=10, repeat=3, budget=1.0, timeout=120.0)
     add_quick_option(p, "3 frames, 1 repeat", frames=3, repeat=1)
-    add_output_options(p, "tune", report_dir="docs/")
+    add_output_options(p, "tune", report_dir="docs/ for --families, OUT with --quick")
     return p
 
 
@@ -324,11 +329,14 @@ def points_table(rows: pd.DataFrame) -> pd.DataFrame:
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     if args.report_only:  # the same study, replayed from its rows: nothing is measured
-        return study(args, argv, Runner(replay=stored_runs(Path(args.out))), Path(args.out))
+        args = measured_args(args)
+        return study(args, Plan.from_args(args), Runner(replay=stored_runs(Path(args.out))), Path(args.out))
+    plan = Plan.from_args(args)  # every input checked before --out is touched
     with Output(args.out, "tune", command_line("tune", argv), args.resume) as out:
+        out.meta(argv=list(sys.argv[1:] if argv is None else argv))  # what --report-only replays
         writer = RowWriter(out.path, args.resume)
         with Runner(writer, out, pool=Pool.from_args(args)) as runner:
-            code = study(args, argv, runner, out.path)
+            code = study(args, plan, runner, out.path)
         writer.finish()
     rows, _ = read_rows(out.path)
     points_table(rows).to_csv(out.path / "tune.csv", index=False)
@@ -336,25 +344,50 @@ def main(argv: list[str] | None = None) -> int:
     return code
 
 
-def study(args, argv, runner: Runner, out: Path) -> int:
+def measured_args(args):
+    """For --report-only: the options of the run that measured --out (its command in meta.json),
+    so that the replay asks for the very jobs it ran; where the report goes is this command's."""
+    meta = read_meta(Path(args.out))
+    measured = parse(meta["argv"] if "argv" in meta else shlex.split(meta["command"])[3:])
+    measured.report_only, measured.resume, measured.out = True, False, args.out
+    measured.report_dir = args.report_dir
+    return measured
+
+
+@dataclass
+class Plan:
+    """What one tune run measures, resolved from the options (each bad one a CliError)."""
+    backends: list[str] = field(default_factory=list)
+    missing: dict[str, str] = field(default_factory=dict)
+    scenes: list = field(default_factory=list)
+
+    @classmethod
+    def from_args(cls, args) -> "Plan":
+        if args.families:
+            return cls()
+        chosen = matched_backends(args.backends)
+        missing = warn_unavailable(chosen) if args.backends != "*" else {}  # "*": every one here with knobs
+        backends = tunable([b for b in chosen if b not in missing])
+        if not backends:
+            raise CliError(f"none of {args.backends!r} has parameters to tune; tunable: "
+                           f"{', '.join(tunable(engines.names()))}")
+        base = scene_from_args(args)
+        scenes = [base if n == base.n else scene_from_args(argparse.Namespace(**{**vars(args), "n": n}))
+                  for n in args.sizes or [base.n]]
+        return cls(backends, missing, scenes)
+
+
+def study(args, plan: Plan, runner: Runner, out: Path) -> int:
     if args.families:
-        report_dir = Path(args.report_dir) if args.report_dir else docs_folder()
+        report_dir = report_folder(args, out, {"full": not args.quick})
         families_report(runner, out, report_dir, args)
         print(f"\nwrote {out / 'families.csv'}, {report_dir / 'TUNING.md'}")
         return 0
-    chosen = matched_backends(args.backends)
-    missing = warn_unavailable(chosen) if args.backends != "*" else {}  # "*": every one here with knobs
-    backends = tunable([b for b in chosen if b not in missing])
-    if not backends:
-        raise CliError(f"none of {args.backends!r} has parameters to tune; tunable: "
-                       f"{', '.join(tunable(engines.names()))}")
-    base = scene_from_args(args)
     best = []
-    for n in args.sizes or [base.n]:
-        scene = base if n == base.n else scene_from_args(argparse.Namespace(**{**vars(args), "n": n}))
+    for scene in plan.scenes:
         print(f"scene {scene.name}: n={scene.n}, radii {scene.radius_range[0]:g}..{scene.radius_range[1]:g}, "
               f"{args.frames} frames x {args.repeat} repeats per point")
-        results = run_tune(runner, scene, backends, args)
+        results = run_tune(runner, scene, plan.backends, args)
         best += best_rows(results, scene.n)
         plot_sweeps(results, out / f"tune_n{scene.n}.png", f"{scene.name}, n={scene.n}")
     table = pd.DataFrame(best)
@@ -362,12 +395,11 @@ def study(args, argv, runner: Runner, out: Path) -> int:
     if args.sizes:
         plot_optimum_against_n(table, out / "optimum_vs_n.png")
     if runner.output is not None:
-        runner.output.meta(unavailable=missing)
+        runner.output.meta(unavailable=plan.missing)
     print(f"\nwrote {out}/: best.csv, tune_n*.png" + (", optimum_vs_n.png" if args.sizes else "") + ", meta.json")
-    if missing:
-        print(f"NOT RUN (unavailable here): {', '.join(missing)}")
+    if plan.missing:
+        print(f"NOT RUN (unavailable here): {', '.join(plan.missing)}")
     return 0
-
 
 if __name__ == "__main__":
     sys.exit(run_cli("tune", main, None))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import signal
+import tempfile
 from functools import cache
 
 from engines import registry
@@ -28,6 +29,18 @@ class Crashes(Brute):
     name = "test.crash"
 
     def _pairs(self):
+        os.kill(os.getpid(), signal.SIGSEGV)
+
+
+class LeavesFiles(Brute):
+    """Writes a temporary folder, as an engine's scene files would, then crashes before it can
+    remove it."""
+
+    name = "test.leaves_files"
+
+    def _pairs(self):
+        marker = tempfile.mkdtemp(prefix="test-leaves-files-")
+        print(marker, flush=True)
         os.kill(os.getpid(), signal.SIGSEGV)
 
 

@@ -128,14 +128,22 @@ def test_a_worker_killed_mid_job_costs_that_job_one_retry_and_no_row(tmp_path):
     assert rows.status.eq("ok").all(), rows.status.unique()
 
 
-def test_an_unreachable_scheduler_is_one_line_and_exit_2():
+def test_an_unreachable_scheduler_is_one_line_and_exit_2_before_the_output_folder_is_made(tmp_path):
     start = time.monotonic()
+    out = tmp_path / "never"
     done = subprocess.run([sys.executable, "-m", "studies.compare", "--n", "64", "--quick", "--scheduler",
-                           f"tcp://127.0.0.1:{free_port()}"], capture_output=True, text=True, cwd=ROOT, timeout=120)
+                           f"tcp://127.0.0.1:{free_port()}", "--out", str(out)], capture_output=True, text=True,
+                          cwd=ROOT, timeout=120)
     assert done.returncode == 2
     err = done.stderr.strip().splitlines()
     assert len(err) == 1 and "cannot reach the Dask scheduler at tcp://127.0.0.1" in err[0], done.stderr
     assert time.monotonic() - start < 30
+    assert not out.exists()
+
+
+def test_a_scheduler_address_that_is_not_one_is_refused(capsys):
+    assert scale_cli(["--quick", "--scheduler", "tcp://nohostport"]) == 2
+    assert "--scheduler must look like tcp://HOST:PORT" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("argv, problem", [

@@ -233,8 +233,10 @@ def test_a_backend_over_budget_in_a_later_repeat_says_its_earlier_rows_are_kept(
     assert [r["status"] for r in outcome.rows] == ["ok"] * (small_trajectory.frames - 1) + [outcome.rows[-1]["status"]]
 
 
-def test_crash_in_a_real_engine_does_not_stop_the_study(tmp_path):
-    # coal.sap segfaults on zero radii (see test_engines); compare must record it and go on.
+def test_input_a_real_engine_would_crash_on_is_its_outcome_and_the_study_goes_on(tmp_path):
+    # coal.sap segfaults on zero radii (see test_engines): the interface refuses them, and compare
+    # records the refusal as coal.sap's outcome while own.grid runs. (A crash that gets through is
+    # recorded too: test_first_hour's fake engine.)
     scene = tmp_path / "points.csv"
     scene.write_text("x,y,r\n0,0,0\n1,0,0\n0,0,1\n")
     out = tmp_path / "run"
@@ -242,8 +244,9 @@ def test_crash_in_a_real_engine_does_not_stop_the_study(tmp_path):
     if "coal.sap is NOT AVAILABLE" in result.stderr:
         pytest.skip("coal is not available here")
     assert result.returncode == 0, result.stderr[-2000:]
-    assert "coal.sap: crashed: signal 11" in result.stdout
-    assert json.loads((out / "meta.json").read_text())["outcomes"]["coal.sap"].startswith("crashed")
+    assert "coal.sap: error: ValueError: coal.sap: radius 0 (object 0), which it cannot create" in result.stdout
+    outcomes = json.loads((out / "meta.json").read_text())["outcomes"]
+    assert outcomes["coal.sap"].startswith("error") and outcomes["own.grid"] == "ok"
 
 
 def test_headline_sets_our_fastest_against_the_fastest_engine():

@@ -48,7 +48,7 @@ def test_recommend_answers_on_a_large_mixed_scene_within_its_limit(tmp_path, cap
                            "--out", str(out)]) == 0
     assert time.monotonic() - start < 60
     printed = capsys.readouterr().out
-    assert "Use own." in printed and re.search(r"boxes cover \d+% of the extent", printed)
+    assert "Use own." in printed and re.search(r"boxes cover \d+% of the scene.s box", printed)
     md = (out / "recommend.md").read_text()
     for name in ("recommend.png",):
         assert name in md and (out / name).stat().st_size > 1000

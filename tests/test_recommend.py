@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import json
+import time
 
 import pandas as pd
+
+import engines
 
 from fakes import Lossy, register
 from scenes import generate
@@ -81,6 +84,40 @@ def test_max_error_admits_a_setting_that_misses_within_it_and_says_what_it_gives
     assert "Use within (every=5)" in text
     assert "It gives up 0.005 of the contacts (5 of 1000 missed" in text and "--max-error of 0.01" in text
     assert [[e.backend for e in g] for g in rank([Entry("within", within.trial)])] == []  # the default: 0
+
+
+def test_the_verdict_says_what_the_error_allowance_bought():
+    traits = measure_traits(simulate(generate("uniform", 100, seed=1), 2))
+    inexact = Trial("own.verlet", {"every": 20}, "ok", 1.0, 0.9, 1.1, 5, contacts=1000, contacts_missed=5)
+    exact = Trial("own.verlet", {}, "ok", 2.5, 2.4, 2.6)
+    won = Entry("own.verlet", inexact, tuned=True, max_error=0.01, defaults=exact)
+    other = Entry("own.grid", Trial("own.grid", {}, "ok", 3.0, 2.9, 3.1), max_error=0.01)
+    text = "\n".join(verdict(rank([won, other]), [won, other], traits))
+    assert "Allowing it bought 2.5x: the fastest exact setting measured, own.verlet (defaults), takes 2.5 ms" in text
+    # An exact winner: the allowance bought nothing, and the verdict says so, naming what was tried.
+    slow = Trial("own.verlet", {"every": 5}, "ok", 4.0, 3.9, 4.1, 2, contacts=1000, contacts_missed=2)
+    plain = Entry("own.grid", Trial("own.grid", {}, "ok", 3.0, 2.9, 3.1), max_error=0.01)
+    tried = Entry("own.verlet", exact, max_error=0.01, inexact=slow)
+    text = "\n".join(verdict(rank([plain, tried]), [plain, tried], traits))
+    assert "bought nothing here: the fastest setting that misses contacts, own.verlet (every=5" in text
+    assert "bought" not in "\n".join(verdict(rank([entry("a", 1.0, 0.9, 1.1)]), [entry("a", 1.0, 0.9, 1.1)], traits))
+
+
+def test_every_backend_has_a_place_in_the_run_order():
+    names = engines.names()
+    ordered = recommend.run_order(names)
+    assert sorted(ordered) == sorted(names) and ordered[0].startswith("own.") and ordered[-1] == "own.brute"
+
+
+def test_trials_get_their_repeats_before_more_frames():
+    trials = recommend.Trials.__new__(recommend.Trials)
+    trials.frames, trials.repeats, trials.deadline = 20, 3, time.perf_counter() + 60
+    probe = Trial("own.grid", {}, "ok", 0.05, 0.05, 0.05, setup_s=0.3)
+    # A fast backend: its probe job took 0.4 s, nearly all of it fixed cost; 6 s of room.
+    assert trials.trial_size(probe, 0.4, share=20) == (20, 3)
+    slow = Trial("physx.sap", {}, "ok", 50.0, 50.0, 50.0, setup_s=0.5)
+    frames, repeats = trials.trial_size(slow, 0.6, share=20)
+    assert repeats >= 2 and frames >= recommend.MIN_FRAMES
 
 
 def test_end_to_end_max_error_ranks_a_backend_that_misses_within_it(tmp_path, monkeypatch, capsys):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 import subprocess
 import sys
@@ -80,11 +81,16 @@ def test_scale_study_quick(tmp_path):
     assert f"the report redone by `python -m studies.scale --report-only --out {out}`" in redone
 
 
-def test_bench_quick_prints_the_targets_with_the_floor():
-    done = subprocess.run([sys.executable, "-m", "studies.bench", "--quick", "--frames", "2", "--seconds", "0.05"],
-                          cwd=ROOT, capture_output=True, text=True, timeout=600)
+def test_bench_quick_prints_the_targets_with_the_floor(tmp_path):
+    done = subprocess.run([sys.executable, "-m", "studies.bench", "--quick", "--frames", "2", "--seconds", "0.05",
+                           "--out", str(tmp_path / "bench")], cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
-    table, targets = done.stdout.split("\n\n")
+    table, targets, wrote = done.stdout.split("\n\n")
+    assert wrote.strip() == f"wrote {tmp_path / 'bench' / 'bench.csv'} and {tmp_path / 'bench' / 'meta.json'}"
+    written = pd.read_csv(tmp_path / "bench" / "bench.csv")
+    assert list(written.variant) == [line.split()[3] for line in table.splitlines()[2:]]
+    assert json.loads((tmp_path / "bench" / "meta.json").read_text())["targets"] == \
+        [line.strip() for line in targets.splitlines()[1:]]
     assert table.startswith("Parallel variants run on") and "threading layer" in table.splitlines()[0]
     lines = [line.split() for line in table.splitlines()[2:]]
     assert [(line[0], line[1], line[2], line[4]) for line in lines] == [
@@ -108,11 +114,14 @@ def test_bench_quick_prints_the_targets_with_the_floor():
     assert verdict.endswith(": met") or "NOT MET" in verdict
 
 
-def test_bench_coherence_sets_each_sorted_structure_from_scratch_beside_repaired():
+def test_bench_coherence_sets_each_sorted_structure_from_scratch_beside_repaired(tmp_path):
     done = subprocess.run([sys.executable, "-m", "studies.bench", "--quick", "--coherence", "--frames", "3",
-                           "--seconds", "0.05"], cwd=ROOT, capture_output=True, text=True, timeout=600)
+                           "--seconds", "0.05", "--out", str(tmp_path)], cwd=ROOT, capture_output=True, text=True,
+                          timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
-    lines = {line.split()[1]: line.split() for line in done.stdout.splitlines()[1:]}
+    printed = done.stdout.split("\n\n")[0]
+    lines = {line.split()[1]: line.split() for line in printed.splitlines()[1:]}
+    assert list(pd.read_csv(tmp_path / "bench.csv").backend) == list(lines)
     assert list(lines) == ["own.grid", "own.sap", "own.quadtree"]
     for n, _, scratch_ms, coherent_ms, ratio, repaired, moved_by_repair, changed_cell in lines.values():
         assert n == "2048" and float(scratch_ms) > 0 and float(coherent_ms) > 0

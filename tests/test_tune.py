@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+import re
+import subprocess
+import sys
+
 import pandas as pd
 import pytest
 
 import engines
-from engines.knobs import Knob
+from engines.knobs import Knob, frames_needed
 from fakes import Lossy, register
 from scenes import generate
 from studies import tune
+from studies.tune import describe_result
 from studies.lib.runner import Runner
 from studies.lib.trials import Trial, run_trial
 from studies.lib.tuning import Sweep, tune_backend
@@ -36,8 +41,40 @@ def test_a_setting_that_misses_pairs_is_never_chosen_even_when_faster(monkeypatc
     tuned = tune_backend(scene, "test.lossy", measure, knobs=(Knob("drop", lambda s: [5, 0], "pairs dropped"),))
     lossy, clean = tuned.sweeps[0].points
     assert lossy[1].missed > 0 and clean[1].missed == 0
-    assert tuned.params == {"drop": 0}
+    # The clean setting, or the defaults (drop=0 too) where they measured faster: never the lossy one.
+    assert tuned.params == ({} if tuned.default_is_best else {"drop": 0})
     assert tuned.default.ok and tuned.loss == pytest.approx(tuned.default.median_ms / tuned.best.median_ms - 1)
+
+
+def test_the_defaults_are_a_candidate_and_best_means_fastest_measured():
+    scene = generate("uniform", 50, seed=1)
+    times = {"k": {1: 3.0, 2: 2.0}, "best": 2.0, "default": 1.0}
+
+    def measure(params, step):
+        return trial(times[step][params["k"]] if step == "k" else times[step])
+
+    tuned = tune_backend(scene, "own.grid", measure, knobs=(Knob("k", lambda s: [1, 2], "k"),))
+    assert tuned.default_is_best and tuned.params == {} and tuned.setting == "the defaults"
+    assert tuned.best is tuned.default and tuned.loss == 0.0
+    assert describe_result(tuned).startswith("own.grid: best the defaults: 1.000 ms")
+    times["default"] = 5.0
+    slower = tune_backend(scene, "own.grid", measure, knobs=(Knob("k", lambda s: [1, 2], "k"),))
+    assert not slower.default_is_best and slower.setting == "k=2" and slower.loss == pytest.approx(1.5)
+
+
+def test_a_period_is_never_measured_over_fewer_frames_than_it_spans():
+    scene = generate("uniform", 50, seed=1)
+    asked = []
+
+    def measure(params, step):
+        asked.append((step, dict(params)))
+        return trial(1.0)
+
+    every = Knob("every", lambda s: [2, 5, 10, 20], "rebuild every k frames", period=True)
+    tune_backend(scene, "own.verlet", measure, knobs=(every,), max_period=10)
+    assert [p["every"] for step, p in asked if step == "every"] == [2, 5, 10]
+    assert frames_needed((every,), {"every": 20}) == 20 and frames_needed((every,), {}) == 1
+    assert any(k.period for k in engines.backend_class("own.verlet").sweeps)
 
 
 def test_every_knob_has_values_for_odd_scenes():
@@ -62,7 +99,11 @@ def test_quick_tune_end_to_end_writes_rows_figures_and_best(tmp_path, capsys):
     assert set(best.param) == {"capacity", "max_depth", "axis", "sweep", "strips"}
     for name in ("tune_n64.png", "tune_n128.png", "optimum_vs_n.png", "meta.json"):
         assert (out / name).stat().st_size > 1000 or name == "meta.json"
-    assert "own.quadtree: best capacity=" in capsys.readouterr().out
+    assert re.search(r"own.quadtree: best (capacity=\d+, max_depth=\d+|the defaults): ", capsys.readouterr().out)
+    # The report again, from the rows alone: the run's own options (--quick, --sizes) come from meta.json.
+    (out / "best.csv").unlink()
+    assert tune.main(["--report-only", "--out", str(out)]) == 0
+    pd.testing.assert_frame_equal(pd.read_csv(out / "best.csv"), best)
 
 
 def test_families_report_lists_every_family_and_backend(tmp_path, monkeypatch):
@@ -88,3 +129,14 @@ def test_bad_options_are_one_line_errors(argv, message, capsys, tmp_path):
     assert run_cli("tune", tune.main, [*argv, "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
+
+
+def test_no_thread_pool_is_forked_into_the_trials(tmp_path):
+    """Our parallel kernels never run in the study's process: its children are forked from a
+    worker thread, and a TBB pool started there would be in an undefined state in each (numba
+    warns of it on every fork)."""
+    done = subprocess.run([sys.executable, "-m", "studies.tune", "--quick", "--n", "256", "--backends",
+                           "own.grid_parallel,own.sap", "--out", str(tmp_path)], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "Numba" not in done.stderr and "fork" not in done.stderr, done.stderr[-2000:]

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Literal
 import numpy as np
 import numpy.typing as npt
 
-from scenes.scene import check_mask, check_positions, check_radii
+from scenes.scene import check_mask, check_positions, check_radii, shown
 
 if TYPE_CHECKING:
     from .knobs import Knob
@@ -63,17 +63,28 @@ class Limits:
         if n and self.coordinate < math.inf:
             reach = float(np.abs(positions).max())
             if reach > self.coordinate:
-                return f"coordinates up to {reach:.3g}, beyond its limit of {self.coordinate:.3g}"
+                return f"coordinates up to {beside(reach, self.coordinate)}, beyond its limit of {self.coordinate:.3g}"
         if radii is not None and len(radii):
             if not self.zero_radius and radii.min() == 0.0:
                 return f"radius 0 (object {int(radii.argmin())}), which it cannot create"
             positive = np.where(radii > 0, radii, np.inf)
             if self.min_radius > 0 and positive.min() < self.min_radius:
-                return (f"radius {positive.min():.3g} (object {int(positive.argmin())}), under its limit of "
-                        f"{self.min_radius:.3g}")
+                return (f"radius {beside(positive.min(), self.min_radius)} (object {int(positive.argmin())}), under "
+                        f"its limit of {self.min_radius:.3g}")
             if radii.max() > self.radius:
-                return f"radius {radii.max():.3g} (object {int(radii.argmax())}), over its limit of {self.radius:.3g}"
+                return (f"radius {beside(radii.max(), self.radius)} (object {int(radii.argmax())}), over its limit of "
+                        f"{self.radius:.3g}")
         return None
+
+
+def beside(value: float, limit: float) -> str:
+    """`value` with 3 significant digits, or as many more as it takes to differ from `limit` as
+    printed (1.0000001e15 beyond a limit of 1e15 would print as 1e+15 otherwise)."""
+    for digits in range(3, 18):
+        text = f"{float(value):.{digits}g}"
+        if text != f"{float(limit):.3g}":
+            return text
+    return repr(float(value))
 
 
 NO_LIMITS = Limits()
@@ -224,7 +235,7 @@ class BroadPhase(ABC):
         """The parameter `key` as an int >= minimum, or a ValueError naming it."""
         value = self.params[key]
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-            raise ValueError(f"{self.name}: {key} must be an integer >= {minimum}, got {value!r}")
+            raise ValueError(f"{self.name}: {key} must be an integer >= {minimum}, got {shown(value)}")
         return int(value)
 
     def engine_broadphase_s(self) -> float | None:

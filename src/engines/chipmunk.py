@@ -16,6 +16,8 @@ import numpy as np
 import pymunk
 import pymunk.batch as batch
 
+from scenes.scene import shown
+
 from .base import BroadPhase, hash_cells_problem
 from .knobs import HASH_CELL_FACTORS, Knob, mean_diameter, sizes
 from .pairs import canonical
@@ -37,7 +39,7 @@ class HashCellGuard:
 
     def _set_dim(self, dim) -> None:
         if not (np.isfinite(dim) and dim > 0):
-            raise ValueError(f"{self.name}: dim must be a positive size, got {dim!r}")
+            raise ValueError(f"{self.name}: dim must be a positive size, got {shown(dim)}")
         self._dim = float(dim)
 
     def _check_cells(self, positions: np.ndarray) -> None:

@@ -22,6 +22,15 @@ class Knob:
     param: str
     values: Callable[[Scene], list[Any]]
     label: str  # axis label of the sweep's figure
+    # The values are frame counts that a setting amortises its work over (a rebuild every k
+    # frames): a point measured over fewer frames than its value never pays that work, so it is
+    # measured over at least that many (frames_needed), or not at all.
+    period: bool = False
+
+
+def frames_needed(knobs: tuple[Knob, ...], params: dict[str, Any]) -> int:
+    """The fewest timed frames that measure `params` fairly: the largest period among them (1 if none)."""
+    return max([1] + [int(params[k.param]) for k in knobs if k.period and params.get(k.param) is not None])
 
 
 def mean_diameter(scene: Scene) -> float:

@@ -96,6 +96,22 @@ def scene_usda(positions: np.ndarray, radii: np.ndarray, broadphase: str, static
     return "\n".join(lines + ["}"]) + "\n"
 
 
+# Contact points per touching pair in the binding's read: one for each body's sensor (measured:
+# 140620 points for 65081 touching pairs and the pairs within the contact offset).
+POINTS_PER_PAIR = 2
+CONTACT_OFFSET = 0.4
+
+
+def contact_room(positions: np.ndarray, radii: np.ndarray) -> int:
+    """Contact points the binding should hold for this scene: twice the points of the pairs
+    within the contact offset now (a pile that settles packs closer; a read that still overflows
+    is taken again with a larger binding)."""
+    from own.reference import box_pairs
+
+    pairs = len(box_pairs(positions, radii + CONTACT_OFFSET)) if len(radii) else 0
+    return max(64, 2 * POINTS_PER_PAIR * pairs)
+
+
 class _PhysX(BroadPhase):
     exact = False
     reports = "contacts"
@@ -104,9 +120,10 @@ class _PhysX(BroadPhase):
     # A sphere of radius 0 is an invalid shape to PhysX: it leaves the object out, and its pairs are lost.
     # At its default density a sphere's inverse inertia, 1 / (1.7e3 r^5), overflows float32 below
     # r = 4.4e-9 (measured: 4e-9 fails, 4.5e-9 runs); PhysX then rejects the body's pose and the step fails.
-    limits = Limits(zero_radius=False, min_radius=1e-8,
-                    why="PhysX cannot create a sphere of radius 0, and under r = 4.4e-9 its inverse inertia "
-                        "overflows float32")
+    # Beyond float32's range (3.4e38) a radius or coordinate is infinite to it: no pair at all.
+    limits = Limits(zero_radius=False, min_radius=1e-8, coordinate=1e38, radius=1e38,
+                    why="PhysX cannot create a sphere of radius 0, under r = 4.4e-9 its inverse inertia "
+                        "overflows float32, and beyond 3.4e38 float32 has no values")
     broadphase = ""  # physxScene:broadphaseType
 
     def _reset(self, positions, radii):
@@ -128,7 +145,7 @@ class _PhysX(BroadPhase):
         self._physx.wait_all()
         self._ordinal = 1  # the stage's last sealed edit
         self._query = self._physx.query(ov.SimObjectType.RIGID_BODY, scope=ov.ObjectScope.ALL).wait()
-        self._bind_contacts(max(64, 16 * self.n))
+        self._bind_contacts(contact_room(positions, self.radii))
         self._known = (np.empty(0, np.uint64), np.empty(0, np.int64))  # actor ids seen, sorted; their objects
         self._rows = None  # object index of each row of the write groups, found at the first write
         self._xyz = np.zeros((self.n, 3), np.float32)
@@ -223,7 +240,9 @@ class _PhysX(BroadPhase):
             return EMPTY_PAIRS.copy()
         self._physx.step_sync(FRAME_DT)
         forces, points, normals, separations, layout, handles = self._buffers
-        count = self._contacts.read_raw_contact_data(forces, points, normals, separations, layout, handles)
+        # PhysX warns on stdout of every read its binding cannot hold whole; that is handled here.
+        with native_output_silenced():
+            count = self._contacts.read_raw_contact_data(forces, points, normals, separations, layout, handles)
         while count >= len(handles):
             # More contact points than the binding holds: a larger one, and the step again from the
             # same positions (they and the velocities are written anew each frame, so it is the same step).
@@ -231,7 +250,9 @@ class _PhysX(BroadPhase):
             self._write_positions()
             self._physx.step_sync(FRAME_DT)
             forces, points, normals, separations, layout, handles = self._buffers
-            count = self._contacts.read_raw_contact_data(forces, points, normals, separations, layout, handles)
+            with native_output_silenced():
+                count = self._contacts.read_raw_contact_data(forces, points, normals, separations, layout,
+                                                             handles)
         objects = self._objects(handles[:count].ravel()).reshape(-1, 2)
         self._stats = {"contact_points": int(count)}
         return canonical(objects[:, 0], objects[:, 1])

@@ -18,7 +18,9 @@ from __future__ import annotations
 import numpy as np
 import rapier3d
 
-from .base import EMPTY_PAIRS, FLOAT32_BREAKS, BroadPhase
+from scenes.scene import shown
+
+from .base import EMPTY_PAIRS, FLOAT32_BREAKS, FLOAT32_LIMITS, BroadPhase
 from .knobs import Knob, fixed
 
 
@@ -27,6 +29,7 @@ class RapierBvh(BroadPhase):
 
     name, method = "rapier.bvh", "tree"
     breaks = FLOAT32_BREAKS
+    limits = FLOAT32_LIMITS  # measured: a radius of 1e39 among two circles, no pair at all
     exact = False
     reports = "boxes"
     defaults = {"prediction": 0.002}
@@ -36,7 +39,7 @@ class RapierBvh(BroadPhase):
     def _reset(self, positions, radii):
         prediction = self.params["prediction"]
         if not (isinstance(prediction, (int, float)) and np.isfinite(prediction) and prediction >= 0):
-            raise ValueError(f"{self.name}: prediction must be a distance >= 0, got {prediction!r}")
+            raise ValueError(f"{self.name}: prediction must be a distance >= 0, got {shown(prediction)}")
         self._colliders = rapier3d.ColliderSet()
         self._static = self.static if self.static is not None else np.zeros(self.n, dtype=bool)
         self._handles: list = [None] * self.n  # each object's collider while it is alive

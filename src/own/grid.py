@@ -28,6 +28,7 @@ import numpy as np
 
 from engines.base import BroadPhase
 from engines.knobs import Knob, mean_diameter, sizes
+from scenes.scene import shown
 
 from .common import PairCollector, centre_extents, emit, one_radius, radius_of
 from .compress import NATIVE, SLACK_ROWS, scan_compressed
@@ -488,7 +489,7 @@ class CellLayout(SmallScenes, BroadPhase):
         if p is not None:
             self._int_param("p", 1)
         if cell is not None and not (np.isfinite(cell) and cell > 0):
-            raise ValueError(f"{self.name}: cell must be a positive finite size, got {cell!r}")
+            raise ValueError(f"{self.name}: cell must be a positive finite size, got {shown(cell)}")
 
     def _start_layout(self, radii):
         """The cell size, p and cell cap for these objects, no layout yet, and the one radius of
@@ -537,7 +538,7 @@ class UniformGrid(CellLayout):
         vector = self.params["vector"]
         if vector not in (None, True, False):
             raise ValueError(f"{self.name}: vector must be True, False or None (where the CPU has AVX-512), "
-                             f"got {vector!r}")
+                             f"got {shown(vector)}")
         self._vector = NATIVE if vector is None else bool(vector)
         # Kept across resets, as every backend's collector is: a fresh one's first buffer is too
         # small for a frame's pairs, so the pair search ran twice (rain, rebuilt every frame).

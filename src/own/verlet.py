@@ -20,6 +20,7 @@ import numpy as np
 
 from engines.base import BroadPhase
 from engines.knobs import Knob, fixed, mean_diameter, sizes
+from scenes.scene import shown
 
 from .common import PairCollector, emit
 from .grid import UniformGrid
@@ -71,7 +72,7 @@ class VerletList(StaticsApart, BroadPhase):
     name, method = "own.verlet", "grid"
     defaults = {"skin": None, "every": None, "precision": "float64", "fat": False}
     sweeps = (Knob("skin", sizes(mean_diameter, SKIN_FACTORS), "skin"),
-              Knob("every", fixed([2, 5, 10, 20]), "rebuild every k frames"),
+              Knob("every", fixed([2, 5, 10, 20]), "rebuild every k frames", period=True),
               Knob("precision", fixed(list(PRECISIONS)), "coordinates"),
               Knob("fat", fixed([True]), "fat-box pairs reported untested"))
 
@@ -79,7 +80,7 @@ class VerletList(StaticsApart, BroadPhase):
         super().__init__(**params)
         skin, every = self.params["skin"], self.params["every"]
         if skin is not None and not (isinstance(skin, (int, float)) and np.isfinite(skin) and skin >= 0):
-            raise ValueError(f"{self.name}: skin must be a distance >= 0, got {skin!r}")
+            raise ValueError(f"{self.name}: skin must be a distance >= 0, got {shown(skin)}")
         if every is not None:
             self._int_param("every", 1)
         if self.params["precision"] not in PRECISIONS:

@@ -93,6 +93,21 @@ def gib(size: float) -> str:
     return f"{size / 2**30:.1f} GiB" if size >= 2**30 else f"{size / 2**20:.0f} MiB"
 
 
+# A generated scene's own arrays per object (x, y, r, vx, vy in float64), before any frame is stepped.
+SCENE_BYTES_PER_OBJECT = 5 * 8
+
+
+def size_problem(n: int, frames: int, memory: int | None = None) -> str | None:
+    """Why a scene of n objects stepped for `frames` frames cannot fit in memory, from n alone (a
+    lower bound: no pairs counted), so that a hopeless size is refused before any array is made."""
+    memory = int(MEMORY_SHARE * available_memory()) if memory is None else memory
+    need = n * (SCENE_BYTES_PER_OBJECT + 2 * frames * POSITION_BYTES + WORKING_BYTES_PER_OBJECT)
+    if need > memory:
+        return (f"a scene of n = {n:,} over {frames} frames needs at least {gib(need)} of memory before its pairs "
+                f"are counted; {gib(memory)} can be had here: ask for a smaller --n or fewer --frames")
+    return None
+
+
 def costs(scene: Scene, frames: int, verified: int | None = None) -> Costs:
     """The costs of stepping `scene` for `frames` frames (frame 0 included), computing the exact
     pairs of `verified` of them (all by default)."""

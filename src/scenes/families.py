@@ -30,7 +30,7 @@ import numpy as np
 from tqdm import tqdm
 
 from .recorded import Recording, fill_absent
-from .scene import Scene, check_box
+from .scene import Scene, check_box, shown
 
 FAMILIES: tuple[str, ...] = ("pile", "rain", "tumbler", "smash", "level")
 TRAITS: dict[str, str] = {
@@ -117,10 +117,10 @@ def family_scene(family: str, n: int, seed: int = 0, radii: tuple[float, float] 
     if family not in FAMILIES:
         raise ValueError(f"unknown family {family!r}; choose one of {', '.join(FAMILIES)}")
     if int(n) != n or n < 2:
-        raise ValueError(f"a {family} scene needs n >= 2 objects, got {n!r}")
+        raise ValueError(f"a {family} scene needs n >= 2 objects, got {shown(n)}")
     lo, hi = (float(v) for v in (radii or DEFAULT_RADII))
     if not (0 < lo <= hi and math.isfinite(hi)):
-        raise ValueError(f"radii bounds must satisfy 0 < min <= max, got {radii!r}")
+        raise ValueError(f"radii bounds must satisfy 0 < min <= max, got {shown(radii)}")
     motion = FamilyMotion(family, int(n), int(seed), (lo, hi))
     record = motion.record(FIRST_FRAMES)
     fields = _layout(family, int(n), np.random.default_rng(seed), (lo, hi))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .families import FAMILIES, family_scene
-from .scene import ESSAY_BOX, Scene, check_box
+from .scene import ESSAY_BOX, Scene, check_box, shown
 
 ESSAY_SPEED = 10.0  # px per second, random direction
 ESSAY_RADIUS = 10.0
@@ -15,9 +15,11 @@ ESSAY_COVERAGE = 2048 * 20.0**2 / 2000.0**2
 
 
 def coverage(radii: np.ndarray, box) -> float:
-    """Summed area of the objects' boxes over the box's area."""
+    """Summed area of the objects' boxes over the scene box's area: the one measure of density
+    every study prints (0 where the box's area overflows a double)."""
     xmin, ymin, xmax, ymax = box
-    return float((4.0 * radii**2).sum() / ((xmax - xmin) * (ymax - ymin)))
+    with np.errstate(over="ignore"):
+        return float((4.0 * radii**2).sum() / ((xmax - xmin) * (ymax - ymin)))
 
 
 def box_for_coverage(radii: np.ndarray, share: float = ESSAY_COVERAGE) -> tuple[float, float, float, float]:
@@ -33,11 +35,11 @@ def _radii(rng: np.random.Generator, n: int, radius: float | None, radii: tuple[
     if radii is not None:
         lo, hi = (float(v) for v in radii)
         if not (0 < lo <= hi and np.isfinite(hi)):
-            raise ValueError(f"radii bounds must satisfy 0 < min <= max, got {radii!r}")
+            raise ValueError(f"radii bounds must satisfy 0 < min <= max, got {shown(radii)}")
         return np.exp(rng.uniform(np.log(lo), np.log(hi), n))
     r = ESSAY_RADIUS if radius is None else float(radius)
     if not (np.isfinite(r) and r >= 0):
-        raise ValueError(f"radius must be finite and non-negative, got {radius!r}")
+        raise ValueError(f"radius must be finite and non-negative, got {shown(radius)}")
     return np.full(n, r)
 
 
@@ -104,11 +106,11 @@ def generate(
     if dist not in DISTRIBUTIONS:
         raise ValueError(f"unknown distribution {dist!r}; choose one of {', '.join(SCENE_KINDS)}")
     if int(n) != n or n < 0:
-        raise ValueError(f"n must be a non-negative integer, got {n!r}")
+        raise ValueError(f"n must be a non-negative integer, got {shown(n)}")
     if radius is not None and radii is not None:
         raise ValueError("give either radius or radii, not both")
     if not (np.isfinite(speed) and speed >= 0):
-        raise ValueError(f"speed must be finite and non-negative, got {speed!r}")
+        raise ValueError(f"speed must be finite and non-negative, got {shown(speed)}")
     n = int(n)
     rng = np.random.default_rng(seed)
     r = _radii(rng, n, radius, radii)

@@ -23,7 +23,7 @@ from tqdm import tqdm
 from own.reference import box_pairs, narrow_phase
 
 from .costs import SAMPLE, costs
-from .scene import Scene
+from .scene import Scene, shown
 
 FRAME_DT = 1.0 / 60.0  # seconds per frame: speeds are in units per second, as in the essay
 
@@ -188,9 +188,9 @@ def simulate(scene: Scene, frames: int, dt: float = FRAME_DT, verify: Collection
     time, when all of them would not fit comfortably in memory. A bar on stderr shows the
     progress of a run that takes more than 2 s."""
     if int(frames) != frames or frames < 1:
-        raise ValueError(f"frames must be a positive integer, got {frames!r}")
+        raise ValueError(f"frames must be a positive integer, got {shown(frames)}")
     if not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be positive and finite, got {dt!r}")
+        raise ValueError(f"dt must be positive and finite, got {shown(dt)}")
     # A scene with the essay's response computes every frame's contacts for its motion anyway;
     # only the verified frames' are kept.
     if scene.motion is not None:

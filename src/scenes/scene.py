@@ -15,6 +15,13 @@ FloatArray = npt.NDArray[np.float64]
 ESSAY_BOX: tuple[float, float, float, float] = (0.0, 0.0, 2000.0, 2000.0)
 
 
+
+def shown(value: object) -> str:
+    """A value as an error message shows it: numpy scalars as plain numbers (numpy 2's repr
+    would print np.float64(-1.0)), everything else as repr."""
+    return repr(value.item()) if isinstance(value, np.generic) else repr(value)
+
+
 def real_array(values: object, what: str) -> np.ndarray:
     """`values` as a float64 array; complex, boolean and text values are refused (numpy would drop
     an imaginary part with a warning, or read True as 1), as is anything that is not a number."""
@@ -26,7 +33,7 @@ def real_array(values: object, what: str) -> np.ndarray:
     try:
         return arr.astype(np.float64)
     except (TypeError, ValueError):
-        raise ValueError(f"{what} must be real numbers, got values such as {arr.ravel()[0]!r}") from None
+        raise ValueError(f"{what} must be real numbers, got values such as {shown(arr.ravel()[0])}") from None
 
 
 def check_positions(positions: object, n: int | None = None, what: str = "positions") -> FloatArray:
@@ -67,7 +74,7 @@ def check_radii(radii: object, n: int) -> FloatArray:
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         problem = "negative" if arr[i] < 0 else "not finite"
-        raise ValueError(f"radius {i} is {problem}: {arr[i]!r}")
+        raise ValueError(f"radius {i} is {problem}: {shown(arr[i])}")
     return np.ascontiguousarray(arr)
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import errno
 import sys
+from pathlib import Path
 from typing import Callable
 
 import engines
@@ -24,17 +25,32 @@ class Parser(argparse.ArgumentParser):
         raise CliError(message)
 
 
-# Set by the output folder of the running study, so that an interrupt can say where its rows are.
-interrupted_hint: str = ""
+# Set by the output folder of the running study (open: its rows are being written; finished:
+# every run was measured), so that an interrupt or an error can say where the rows are.
+open_output: Path | None = None
+finished_output: Path | None = None
+
+
+def kept_hint() -> str:
+    """Where the rows measured so far are and how to go on, or "" before any was written."""
+    if open_output is not None:
+        return (f"the runs finished so far are kept in {open_output}; to measure only the rest, run the same "
+                f"command with --resume --out {open_output}")
+    if finished_output is not None:
+        return (f"every run was measured and is kept in {finished_output}; redo the report with --report-only "
+                f"--out {finished_output}")
+    return ""
 
 
 def run_cli(prog: str, main: Callable[[list[str] | None], int], argv: list[str] | None) -> int:
     """Call main(argv); user errors, a full disk and memory running out become one line on stderr
     and exit status 2; an interrupt says where the rows measured so far are."""
+    global open_output, finished_output
+    open_output = finished_output = None
     try:
         return main(argv)
     except CliError as exc:
-        print(f"{prog}: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {exc}" + (f" ({kept_hint()})" if open_output is not None else ""), file=sys.stderr)
     except MemoryError as exc:
         detail = f" ({exc})" if str(exc) else ""
         print(f"{prog}: error: out of memory{detail}: ask for a smaller scene (--n) or fewer --frames",
@@ -45,7 +61,7 @@ def run_cli(prog: str, main: Callable[[list[str] | None], int], argv: list[str] 
         where = f" writing {exc.filename}" if exc.filename else ""
         print(f"{prog}: error: {exc.strerror}{where}; free some space and rerun with --resume", file=sys.stderr)
     except KeyboardInterrupt:
-        print(f"{prog}: interrupted; {interrupted_hint or 'nothing was written yet'}", file=sys.stderr)
+        print(f"{prog}: interrupted; {kept_hint() or 'nothing was written yet'}", file=sys.stderr)
         return 130
     return 2
 

@@ -6,10 +6,12 @@ Every drawn layer is one matplotlib collection tagged with a gid ("circles", "ce
 
 from __future__ import annotations
 
+import textwrap
 import warnings
 
 import numpy as np
 from matplotlib.collections import EllipseCollection, LineCollection
+from matplotlib.lines import Line2D
 
 from engines.pairs import keys
 
@@ -23,6 +25,7 @@ STYLE = {
     "overlaps": {"colors": "tab:green", "linewidths": 1.6},
     "missed": {"colors": "red", "linewidths": 2.2},
 }
+TITLE_WIDTH = 95  # characters per line of a picture's title
 
 
 def _rect_outlines(rects: np.ndarray) -> np.ndarray:
@@ -112,7 +115,7 @@ def draw_frame(fig, positions: np.ndarray, radii: np.ndarray, structure: dict, c
     if unit != 1.0:
         ax.set_xlabel(f"x (in units of {unit:.0e})", fontsize=8)
         ax.set_ylabel(f"y (in units of {unit:.0e})", fontsize=8)
-    ax.set_title(title, fontsize=9)
+    ax.set_title(textwrap.fill(title, TITLE_WIDTH), fontsize=9)  # a backend's parameters can be long
     if strip is not None:
         axis = int(structure["axis"])
         rows = interval_rows(intervals)
@@ -123,10 +126,32 @@ def draw_frame(fig, positions: np.ndarray, radii: np.ndarray, structure: dict, c
         strip.set_ylim(-1, max(rows.max(initial=0) + 1, 1))
         strip.set_yticks([])
         strip.set_xlabel(f"intervals along the sweep axis ({'xy'[axis]}), packed into rows", fontsize=8)
+    legend(fig, counts, bool(fixed[shown].any()))
+    relayout(fig)
+    return counts
+
+
+LAYER_WORDS = {"cells": "grid cells", "nodes": "tree nodes", "intervals": "intervals of the sweep",
+               "candidates": "candidate pairs", "overlaps": "true overlaps found", "missed": "pairs missed"}
+
+
+def legend(fig, counts: dict[str, int], statics: bool) -> None:
+    """What each colour is, under the picture: the circles, and each layer drawn."""
+    handles = [Line2D([], [], ls="", marker="o", mfc="none", color="tab:blue", label="objects")]
+    if statics:
+        handles.append(Line2D([], [], ls="", marker="o", mfc="none", color="0.55", label="static objects"))
+    for layer, words in LAYER_WORDS.items():
+        if counts.get(layer):
+            style = STYLE[layer]
+            handles.append(Line2D([], [], color=style["colors"], lw=max(style["linewidths"], 1.0), label=words))
+    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 4), fontsize=7, frameon=False)
+
+
+def relayout(fig) -> None:
+    """Lay the figure out again (after its title grew), leaving the bottom to the legend."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
-        fig.tight_layout()
-    return counts
+        fig.tight_layout(rect=(0, 0.05, 1, 1))
 
 
 def counted(fig) -> dict[str, int]:

@@ -7,6 +7,7 @@ backends of a family are shades of it, the same in every figure.
 
 from __future__ import annotations
 
+import textwrap
 import warnings
 from pathlib import Path
 
@@ -32,8 +33,11 @@ def save(fig: Figure, path: Path, dpi: int = 110) -> Path:
     """Lay out and write the figure; layout warnings (crowded labels) are not the user's problem."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
-        fig.tight_layout()
-    fig.savefig(path, dpi=dpi)
+        if fig.get_suptitle():  # tight_layout would lay panels over the figure's title
+            fig.set_layout_engine("constrained")
+        else:
+            fig.tight_layout()
+        fig.savefig(path, dpi=dpi)
     return path
 
 
@@ -83,6 +87,32 @@ def pareto_front(table, time: str, cost: str):
     return done.loc[keep]
 
 
+NOTE_WIDTH = 62  # characters per line of a failed backend's status beside compare.png
+
+
+class LabelPlacer:
+    """Offsets for the number labels of points on log-log axes, so that no two labels land on
+    one spot: each label takes the first of a ring of offsets clear of those placed before."""
+
+    OFFSETS = [(5, 4), (5, -11), (-12, 4), (-12, -11), (5, 14), (5, -21), (-12, 14), (-12, -21), (14, -4), (-21, -4)]
+    CLEAR = 0.025  # of the axes, in each direction (about a label's size)
+
+    def __init__(self, xlim: tuple[float, float], ylim: tuple[float, float]) -> None:
+        self.x0, self.xw = np.log10(xlim[0]), np.log10(xlim[1] / xlim[0])
+        self.y0, self.yw = np.log10(ylim[0]), np.log10(ylim[1] / ylim[0])
+        self.taken: list[tuple[float, float]] = []
+
+    def place(self, x: float, y: float) -> tuple[int, int]:
+        # Axes fractions, with offsets in points turned into fractions of a ~700 x 500 point axes.
+        fx, fy = (np.log10(x) - self.x0) / self.xw, (np.log10(y) - self.y0) / self.yw
+        for dx, dy in self.OFFSETS:
+            spot = (fx + dx / 700, fy + dy / 500)
+            if all(abs(spot[0] - a) > self.CLEAR or abs(spot[1] - b) > self.CLEAR for a, b in self.taken):
+                break
+        self.taken.append(spot)
+        return dx, dy
+
+
 def error_against_time(summary, path: Path, title: str) -> Path:
     """Draw compare.png (see error_against_time_figure) and save it."""
     return save(error_against_time_figure(summary, title), path)
@@ -109,6 +139,8 @@ def error_against_time_figure(summary, title: str) -> Figure:
     finite = ratio[np.isfinite(ratio) & (ratio > 0)]
     y_lo, y_hi = (finite.min() / 2, finite.max() * 2) if len(finite) else (0.5, 2.0)
     missed = missed_total(summary) > 0
+    x_hi = x_max * 6 if len(failed) else x_max * 2
+    labels = LabelPlacer((x_min / 2, x_hi), (y_lo / 1.3, y_hi))
     lines = []
     for k, name in enumerate(order, start=1):
         r = summary.loc[name]
@@ -125,7 +157,7 @@ def error_against_time_figure(summary, title: str) -> Figure:
         marker = "X" if missed[name] else ("x" if name not in timed.index else "s" if r["reports"] == "contacts"
                                            else "o")
         ax.scatter(x, y, s=70, marker=marker, color=colour, zorder=3)
-        ax.annotate(str(k), (x, y), textcoords="offset points", xytext=(5, 4 if k % 2 else -11), fontsize=7)
+        ax.annotate(str(k), (x, y), textcoords="offset points", xytext=labels.place(x, y), fontsize=7)
         lines.append((f"{k:>2} {name}", note + ("  MISSED PAIRS" if missed[name] else ""), colour))
     front = pareto_front(timed.loc[~missed[timed.index]], "total_ms", "cand_per_true")
     if len(front) > 1:
@@ -133,7 +165,7 @@ def error_against_time_figure(summary, title: str) -> Figure:
                 label="frontier")
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlim(x_min / 2, x_max * 6 if len(failed) else x_max * 2)
+    ax.set_xlim(x_min / 2, x_hi)
     ax.set_ylim(y_lo / 1.3, y_hi)
     if len(failed):
         ax.axvline(x_max * 1.7, color="0.7", lw=0.8, ls=":")
@@ -147,17 +179,18 @@ def error_against_time_figure(summary, title: str) -> Figure:
                Line2D([], [], ls="", marker="X", color="red", label="missed pairs"),
                Line2D([], [], ls="", marker="x", color="0.4", label="no frame finished"),
                Line2D([], [], color="k", lw=0.8, label="frontier: nothing both faster and leaner")]
-    ax.legend(handles=handles, loc="upper left", fontsize=7, framealpha=0.9)
-    rows = sum(1 if len(note) <= 16 else 2 for _, note, _ in lines)
-    step = min(0.97 / max(rows, 1), 0.035)
+    # The legend under the list beside the plot: inside the axes it hid points and their numbers.
+    side.legend(handles=handles, loc="lower left", fontsize=7, frameon=False)
+    rows = sum(1 if len(note) <= 16 else 1 + len(textwrap.wrap(note, NOTE_WIDTH)) for _, note, _ in lines)
+    step = min(0.8 / max(rows, 1), 0.035)
     y = 0.98
     for label, note, colour in lines:
         side.text(0.0, y, label, fontsize=7, color=colour, va="top", family="monospace", transform=side.transAxes)
         if len(note) <= 16:  # a time: beside the name
             side.text(1.0, y, note, fontsize=6, color="0.3", va="top", ha="right", transform=side.transAxes)
-        else:  # why it has no time: under the name
-            y -= step
-            side.text(0.06, y, note[:70] + ("..." if len(note) > 70 else ""), fontsize=5.5, color="0.3", va="top",
-                      transform=side.transAxes)
+        else:  # why it has no time, whole, under the name
+            for part in textwrap.wrap(note, NOTE_WIDTH):
+                y -= step
+                side.text(0.06, y, part, fontsize=5.5, color="0.3", va="top", transform=side.transAxes)
         y -= step
     return fig

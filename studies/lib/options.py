@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 
 from scenes import DISTRIBUTIONS, ESSAY_COVERAGE, FAMILIES, SCENE_KINDS, Scene, generate
+from scenes.costs import size_problem
 from scenes.io import load_scene
 from scenes.recorded import load_trajectory
 
@@ -80,6 +81,9 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
     given = file_scene(args)
     if given is not None:
         return given
+    problem = size_problem(args.n, (getattr(args, "frames", None) or 1) + 1)
+    if problem:
+        raise CliError(problem)
     try:
         radii = None
         if args.radii:

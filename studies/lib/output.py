@@ -39,6 +39,16 @@ def docs_folder() -> Path:
     return root / "docs" if (root / "pyproject.toml").exists() else Path("docs")
 
 
+def report_folder(args, out: Path, meta: dict[str, Any] | None = None) -> Path:
+    """Where a study's report goes: --report-dir, else docs/ for a full run, else the run's own
+    folder. On --report-only, whether the run was full comes from its meta.json, never from the
+    options of the report command: a quick run's report must not replace the one in docs/."""
+    if getattr(args, "report_dir", None):
+        return Path(args.report_dir)
+    full = (meta or {}).get("full", not args.quick) if args.report_only else not args.quick
+    return docs_folder() if full else Path(out)
+
+
 def cpu_model() -> str:
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -63,13 +73,48 @@ def versions() -> dict[str, str | None]:
     return found
 
 
-def read_meta(folder: Path) -> dict[str, Any]:
-    """The meta.json of an earlier run in `folder` ({} when there is none, or it is unreadable)."""
+class Meta(dict):
+    """meta.json as read back: a field it lacks is one clear line (a CliError naming the file),
+    not a KeyError from deep inside a report."""
+
+    path: Path = Path("meta.json")
+
+    def __missing__(self, key: str):
+        if not self.path.exists():
+            raise CliError(f"{self.path} is missing: no run of this study finished in {self.path.parent}")
+        raise CliError(f"{self.path} has no {key!r}: it was not written by a finished run of this study "
+                       "(rerun the study into this --out, or use another one)")
+
+
+def read_meta(folder: Path) -> Meta:
+    """The meta.json of an earlier run in `folder` (empty when there is none). One that cannot
+    be read, or is not a JSON object, is a CliError: it is never silently replaced."""
     path = Path(folder) / "meta.json"
+    if not path.exists():
+        empty = Meta()
+        empty.path = path
+        return empty
     try:
-        return json.loads(path.read_text()) if path.exists() else {}
-    except (OSError, ValueError):
-        return {}
+        data = json.loads(path.read_text(), object_hook=Meta)
+    except (OSError, ValueError) as exc:
+        raise CliError(f"{path} cannot be read ({getattr(exc, 'strerror', None) or exc}): restore it, or move it "
+                       "aside and rerun the study without --resume") from None
+    if not isinstance(data, Meta):
+        raise CliError(f"{path} is not a study's record (a JSON object but {type(data).__name__}): restore it, or "
+                       "move it aside and rerun the study without --resume")
+    _tag(data, path)
+    return data
+
+
+def _tag(data: Any, path: Path) -> None:
+    """Name the file in every object read from it, for the error of a missing field."""
+    if isinstance(data, Meta):
+        data.path = path
+        for value in data.values():
+            _tag(value, path)
+    elif isinstance(data, list):
+        for value in data:
+            _tag(value, path)
 
 
 def write_json(path: Path, data: dict[str, Any]) -> None:
@@ -94,10 +139,14 @@ class Output:
                 pass
         except OSError as exc:
             raise CliError(f"cannot write to output folder {self.path}: {exc.strerror or exc}") from None
-        self._lock = self._take_lock(command)
-        cli.interrupted_hint = f"the rows so far are in {self.path}: continue with --resume --out {self.path}"
         earlier = read_meta(self.path) if resume else {}
-        self._before_s = float(earlier.get("elapsed_s", 0.0))
+        try:
+            self._before_s = float(earlier.get("elapsed_s", 0.0))
+        except (TypeError, ValueError):
+            raise CliError(f"{self.path / 'meta.json'} has an elapsed_s that is not a number "
+                           f"({earlier['elapsed_s']!r}): fix or remove that field, then --resume") from None
+        self._lock = self._take_lock(command)
+        cli.open_output = self.path
         self._start = time.monotonic()
         self._fields: dict[str, Any] = {
             "date": dt.datetime.now().astimezone().isoformat(timespec="seconds"), "command": command,
@@ -133,14 +182,15 @@ class Output:
         write_json(self.path / "meta.json", data)
         return data
 
-    def close(self) -> None:
+    def close(self, failed: bool = False) -> None:
         if self._lock is not None:
             self._lock.close()  # releases the lock
             self._lock = None
-        cli.interrupted_hint = ""
+        if not failed:  # else the error or interrupt still names this folder, with --resume
+            cli.open_output, cli.finished_output = None, self.path
 
     def __enter__(self) -> "Output":
         return self
 
-    def __exit__(self, *exc) -> None:
-        self.close()
+    def __exit__(self, kind, *exc) -> None:
+        self.close(failed=kind is not None)

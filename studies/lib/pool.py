@@ -17,10 +17,12 @@ import atexit
 import logging
 import os
 import platform
+import socket
 import threading
 import uuid
 import warnings
 from typing import Any
+from urllib.parse import urlsplit
 
 import engines
 
@@ -55,6 +57,23 @@ def check_cluster_options(args: argparse.Namespace) -> None:
         raise CliError("--jobs is for this machine; on a cluster each worker thread runs one job at a time")
     if args.jobs is not None and not 1 <= args.jobs <= cores:
         raise CliError(f"--jobs must be 1..{cores} (the cores of this machine), got {args.jobs}")
+    if args.scheduler:
+        check_reachable(args.scheduler)
+
+
+def check_reachable(address: str) -> None:
+    """A scheduler that does not answer is refused before any output folder is touched."""
+    parsed = urlsplit(address if "://" in address else f"tcp://{address}")
+    try:
+        host, port = parsed.hostname, parsed.port
+    except ValueError:
+        host = port = None
+    if not host or not port:
+        raise CliError(f"--scheduler must look like tcp://HOST:PORT, got {address!r}")
+    try:
+        socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S).close()
+    except OSError as exc:
+        raise CliError(f"cannot reach the Dask scheduler at {address}: {exc.strerror or exc}") from None
 
 
 def uses_all_cores(job: Job) -> bool:
@@ -67,10 +86,15 @@ def execute(job: Job, run_id: str) -> Outcome:
     an isolated child, its outcome with where it ran."""
     try:
         from distributed import get_worker
+        from distributed.utils import sync
 
-        get_worker().log_event(JOB_STARTED, {"run": run_id, "job": job.key})
+        worker = get_worker()
     except ValueError:  # not on a worker (the job was run directly)
         pass
+    else:
+        # Logged by a call the scheduler answers before the job starts: a worker killed right after
+        # could lose an event sent the usual way (batched, later), and with it the retry's count.
+        sync(worker.loop, worker.scheduler.log_event, topic=JOB_STARTED, msg={"run": run_id, "job": job.key})
     traj = trajectories.trajectory(job.scene, job.frames + 1, job.verify)
     outcome = run_isolated(job, traj, stop=_stops.get(job.key))
     outcome.host, outcome.cpu = platform.node(), cpu_model()

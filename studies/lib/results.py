@@ -249,11 +249,23 @@ def read_rows(folder: Path) -> tuple[pd.DataFrame, bool]:
     folder = Path(folder)
     final, partial = folder / FINAL, folder / PARTIAL
     if final.exists():
-        return pd.read_csv(final), True
+        return _checked(pd.read_csv(final), final), True
     if partial.exists():
         data = partial.read_bytes()
-        return pd.read_csv(io.BytesIO(data[:complete_length(data)])), False
+        return _checked(pd.read_csv(io.BytesIO(data[:complete_length(data)])), partial), False
     raise CliError(f"{folder} holds no {FINAL} or {PARTIAL} to report on")
+
+
+def _checked(rows: pd.DataFrame, path: Path) -> pd.DataFrame:
+    """The rows, if the file has a study's columns; else one clear line naming what it lacks."""
+    lacking = [c for c in COLUMNS if c not in rows.columns]
+    if lacking:
+        raise CliError(f"{path} is not a study's rows: it lacks the columns {', '.join(lacking[:5])}"
+                       + (f" and {len(lacking) - 5} more" if len(lacking) > 5 else ""))
+    if rows.empty:
+        raise CliError(f"{path} holds no rows yet: nothing to report (continue the run with --resume --out "
+                       f"{path.parent})")
+    return rows
 
 
 def _iqr(x: pd.Series) -> float:

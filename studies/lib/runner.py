@@ -33,6 +33,8 @@ from .results import RowWriter
 
 Each = Callable[[Job, Outcome], None]
 
+PROGRESS_LOG_S = 10.0  # seconds between progress updates when stderr is not a terminal
+
 
 def finished(outcome: Outcome) -> bool:
     return outcome.status == "ok"
@@ -94,8 +96,9 @@ class Runner:
         results: list[list[Outcome]] = [[] for _ in chains]
         running: dict = {}  # future -> (chain, job)
         planned = sum(map(len, chains))
-        bar = tqdm(total=planned, desc=desc, unit="job", file=sys.stderr, disable=None if planned > 1 else True,
-                   leave=False)
+        # Shown on a terminal and in a log alike (there every PROGRESS_LOG_S): a long run is never silent.
+        bar = tqdm(total=planned, desc=desc, unit="job", file=sys.stderr, disable=planned <= 1, leave=False,
+                   mininterval=0.1 if sys.stderr.isatty() else PROGRESS_LOG_S)
         failed = 0
         completed = None
 

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from scenes import coverage
 from scenes.motion import Trajectory
 
 # Thresholds of the plain-word descriptions.
@@ -29,7 +30,7 @@ class Traits:
     concentration_x: float  # std of x over std of a uniform placement on the x extent
     concentration_y: float
     step_in_radii: float  # median displacement per frame / median radius
-    coverage: float  # summed box area over the extent's area
+    coverage: float  # summed box area over the scene box's area (scenes.coverage, as compare says it)
     # The traits of recorded scenes (0 for the essay's motion): objects that never move, objects
     # that appear or go, movers at rest, and movers over a radius per frame.
     static_share: float = 0.0
@@ -69,7 +70,7 @@ class Traits:
             out.append(f"fast motion ({self.step_in_radii:.2g} radii per frame)")
         else:
             out.append(f"coherent motion ({self.step_in_radii:.2g} radii per frame)")
-        out.append(f"boxes cover {self.coverage:.0%} of the extent")
+        out.append(f"the objects' boxes cover {self.coverage:.0%} of the scene's box")
         return out + self.recorded_words()
 
 
@@ -83,7 +84,6 @@ def measure_traits(traj: Trajectory) -> Traits:
     # would overflow a difference of them.
     half = np.maximum(0.5 * hi - 0.5 * lo, 1e-300)
     unit = np.clip((0.5 * pos - 0.5 * lo) / half, 0.0, 1.0) if n else np.zeros((0, 2))
-    extent = 2.0 * half  # inf beyond the largest double: the coverage is then 0
     side = max(1, int(np.sqrt(n / 4)))
     cells = np.minimum((unit * side).astype(np.int64), side - 1)
     counts = np.bincount(cells[:, 1] * side + cells[:, 0], minlength=side * side) if n else np.zeros(1)
@@ -111,6 +111,6 @@ def measure_traits(traj: Trajectory) -> Traits:
     fast = float((in_radii > 1.0).mean()) if in_radii.size else 0.0
     spawns = float(np.abs(np.diff(alive.astype(np.int8), axis=0)).sum() / ((traj.frames - 1) * n)) \
         if traj.alive is not None and traj.frames > 1 and n else 0.0
-    coverage = float((4 * radii**2).sum() / np.prod(extent + 2 * (radii.max() if n else 0)))
-    return Traits(n, spread, dispersion, float(conc[0]), float(conc[1]), step, coverage,
+    covered = coverage(radii, traj.scene.box)
+    return Traits(n, spread, dispersion, float(conc[0]), float(conc[1]), step, covered,
                   traj.scene.static_share, spawns, resting, fast)

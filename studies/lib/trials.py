@@ -38,6 +38,7 @@ class Trial:
     setup_s: float = float("nan")  # building it and its warm-up frame
     contacts: int = 0  # truly overlapping pairs over the checked frames
     contacts_missed: int = 0  # of those, absent from the candidates
+    key: str = ""  # the key of the job behind it, in the results
 
     @property
     def error(self) -> float:
@@ -61,7 +62,8 @@ class Trial:
     def of(cls, job: Job, outcome: Outcome) -> "Trial":
         """The job's outcome reduced by the shared summary."""
         ok = [r for r in outcome.rows if r["status"] == "ok"]
-        trial = cls(job.backend, dict(job.params), outcome.status if ok or outcome.status != "ok" else "no frames")
+        trial = cls(job.backend, dict(job.params), outcome.status if ok or outcome.status != "ok" else "no frames",
+                    key=job.key)
         timed = [r for r in outcome.rows if r.get("t_total_s") is not None]
         if timed:
             trial.frame_ms = min(r["t_total_s"] for r in timed) * 1e3
@@ -89,8 +91,10 @@ def run_trial(runner: Runner, scene: Scene, backend: str, params: dict[str, Any]
 def warm_up(backend: str) -> None:
     """Compile our numba backends once in this process, so forked trials inherit the machine code
     instead of each loading it from the cache. Engines are not touched here: one that crashes
-    must crash in a child, not in the study."""
-    if not engines.of_kind(backend, "own"):
+    must crash in a child, not in the study. Nor are our parallel kernels: running one here
+    starts numba's thread pool (TBB) in this process, and the children are forked from a worker
+    thread, where TBB's state is undefined in the child; each child loads them from the cache."""
+    if not engines.of_kind(backend, "own") or engines.uses_every_core(backend):
         return
     rng = np.random.default_rng(0)
     b = engines.create(backend)

@@ -33,10 +33,20 @@ class Sweep:
 @dataclass
 class Tuned:
     backend: str
-    params: dict[str, Any]  # the best parameters found ({} if no setting finished cleanly)
+    params: dict[str, Any]  # the best parameters found ({} for the defaults, or if no setting finished cleanly)
     best: Trial | None  # those parameters measured again after the sweeps
     default: Trial | None  # None when the defaults were not measured
     sweeps: list[Sweep] = field(default_factory=list)
+
+    @property
+    def default_is_best(self) -> bool:
+        """Whether the defaults measured fastest (no swept setting beat them)."""
+        return self.best is not None and self.best is self.default
+
+    @property
+    def setting(self) -> str:
+        """The best setting in words ("the defaults" when they won)."""
+        return "the defaults" if self.default_is_best else ", ".join(f"{k}={v}" for k, v in self.params.items())
 
     @property
     def loss(self) -> float:
@@ -63,15 +73,19 @@ def tunable(names: list[str]) -> list[str]:
 
 
 def tune_backend(scene: Scene, backend: str, measure: Measure, knobs: tuple[Knob, ...] | None = None,
-                 with_default: bool = True, max_error: float = 0.0) -> Tuned:
+                 with_default: bool = True, max_error: float = 0.0, max_period: int | None = None) -> Tuned:
     """Sweep every knob of `backend` (its class's `sweeps`, or `knobs`) on `scene`, measuring each
-    point with `measure`. With `with_default`, the default parameters are measured too (Tuned.default)."""
+    point with `measure`. With `with_default`, the default parameters are measured too (Tuned.default).
+    Values of a period knob beyond `max_period` (the frames the measure can run) are not tried:
+    measured over fewer frames than their period, they would never pay their work."""
     params: dict[str, Any] = {}
     sweeps = []
     best: Trial | None = None
     for knob in engines.backend_class(backend).sweeps if knobs is None else knobs:
         points = []
         for value in knob.values(scene):
+            if knob.period and max_period is not None and value > max_period:
+                continue
             points.append((value, measure({**params, knob.param: value}, knob.param)))
         sweep = Sweep(knob, dict(params), points)
         sweeps.append(sweep)
@@ -86,4 +100,6 @@ def tune_backend(scene: Scene, backend: str, measure: Measure, knobs: tuple[Knob
     if best is not None:
         best = measure(params, "best")
     default = measure({}, "default")
+    if default.acceptable(max_error) and (best is None or default.median_ms <= best.median_ms):
+        return Tuned(backend, {}, default, default, sweeps)  # the defaults are a candidate too, and won
     return Tuned(backend, params if best else {}, best, default, sweeps)
