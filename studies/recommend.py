@@ -11,6 +11,7 @@ figure, the rows and meta.json to `--out`.
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 from dataclasses import dataclass
@@ -333,8 +334,8 @@ class Trials:
         frame_s = probe.median_ms / 1e3 + probe.contacts * CHECK_S_PER_PAIR  # its pairs are checked too
         fixed_s = max(probe_s - frame_s, 0.0)
         room = 2 * (self.deadline - time.perf_counter()) / share - fixed_s
-        rebuild_s = min(probe.setup_s, fixed_s) if probe.setup_s == probe.setup_s else fixed_s  # an upper bound:
-        # the probe's build paid for loading compiled code too
+        # A build anew per repeat: at most the probe's, which paid for loading compiled code too.
+        rebuild_s = min(probe.setup_s, fixed_s) if math.isfinite(probe.setup_s) else fixed_s
         for repeats in range(self.repeats, 0, -1):
             frames = min(self.frames, int((room / repeats - rebuild_s) / max(frame_s, 1e-6)))
             if frames >= min(MIN_FRAMES, self.frames):
@@ -466,11 +467,12 @@ def report_only(folder: Path) -> int:
     meta, stored = read_meta(folder), stored_runs(folder)
     if "entries" not in meta:
         raise CliError(f"{folder} holds no finished recommendation (meta.json lists no trials)")
+
     def trial(key: str | None) -> Trial | None:
         if not key:
             return None
-        rows = stored.get(key, [])
-        job = Job(json.loads(key)["backend"], json.loads(key)["params"])
+        rows, measured = stored.get(key, []), json.loads(key)
+        job = Job(measured["backend"], measured["params"])
         return Trial.of(job, Outcome(job.backend, rows[-1]["status"] if rows else "not measured", rows))
 
     entries = [Entry(e["backend"], trial(e["job"]), e["tuned"], e["note"], job=e["job"],
@@ -517,7 +519,7 @@ def tune(entries: list[Entry], trials: Trials, deadline: float) -> None:
             continue
         job = trials.job(e.backend, found.params, "tuned")
         tuned = trials.run(job)
-        setting = ", ".join(f"{k}={v}" for k, v in found.params.items())
+        setting = params_words(found.params)
         if tuned.acceptable(e.max_error) and tuned.error > 0:
             e.inexact = tuned
         # Adopted only when faster beyond the run-to-run spread: otherwise the defaults stand.

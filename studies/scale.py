@@ -142,7 +142,7 @@ def figure(medians: pd.DataFrame, path: Path) -> dict[tuple[str, str], float]:
 
 def ours_fastest(medians: pd.DataFrame) -> pd.DataFrame:
     """Per n, the fastest of our backends on one thread (n, ms)."""
-    ours = medians[[engines.of_kind(b, "own") and not engines.uses_every_core(b) for b in medians.backend]]
+    ours = medians[medians.backend.map(engines.ours_on_one_thread)]
     return ours.loc[ours.groupby("n").ms.idxmin(), ["n", "ms"]].sort_values("n") if len(ours) else ours
 
 
@@ -157,7 +157,7 @@ def ours_against_engines_per_n(medians: pd.DataFrame, kind: str = "engine") -> p
     the fastest by that timer against our quickest update + pairs (`bp_ratio`)."""
     rows = []
     for (dist, n), d in medians.groupby(["dist", "n"], sort=False):
-        ours = d[d.backend.map(lambda b: engines.of_kind(b, "own") and not engines.uses_every_core(b))]
+        ours = d[d.backend.map(engines.ours_on_one_thread)]
         rivals = d[d.backend.map(lambda b: engines.of_kind(b, kind))]
         if len(ours) and len(rivals):
             best, engine = ours.loc[ours.ms.idxmin()], rivals.loc[rivals.ms.idxmin()]

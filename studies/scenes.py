@@ -108,7 +108,7 @@ def family_tables(rows: pd.DataFrame) -> dict[tuple[str, int], pd.DataFrame]:
 def verdict(table: pd.DataFrame) -> dict:
     """Our fastest (one thread) against the fastest engine, and our structured backends over WITHIN."""
     ok = ok_lines(table)
-    ours = [b for b in ok.index if engines.of_kind(b, "own") and not engines.uses_every_core(b)]
+    ours = [b for b in ok.index if engines.ours_on_one_thread(b)]
     rivals = [b for b in ok.index if engines.of_kind(b, "engine")]
     best = min(ours, key=lambda b: ok.loc[b, "broad_ms"]) if ours else None
     engine = min(rivals, key=lambda b: ok.loc[b, "broad_ms"]) if rivals else None

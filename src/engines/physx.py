@@ -159,10 +159,17 @@ class _PhysX(BroadPhase):
             warnings.simplefilter("ignore", DeprecationWarning)
             self._contacts = self._physx.create_contact_binding(sensor_patterns=[PREFIX + "*"],
                                                                  max_contact_data_count=capacity)
+        self._capacity = capacity
         self._buffers = (np.zeros((capacity, 1), np.float32), np.zeros((capacity, 3), np.float32),
                          np.zeros((capacity, 3), np.float32), np.zeros((capacity, 1), np.float32),
                          np.zeros((max(self._contacts.sensor_count, 1), 2), np.uint32),
                          np.zeros((capacity, 2), np.uint64))
+
+    def _read_contacts(self) -> int:
+        """The step's contact points into the binding's buffers; how many there were. PhysX warns
+        on stdout of every read its binding cannot hold whole: the caller handles that."""
+        with native_output_silenced():
+            return self._contacts.read_raw_contact_data(*self._buffers)
 
     def _objects(self, ids: np.ndarray) -> np.ndarray:
         """The object index of each actor id of the contact reads. The ids belong to the binding
@@ -239,20 +246,15 @@ class _PhysX(BroadPhase):
         if self._physx is None:
             return EMPTY_PAIRS.copy()
         self._physx.step_sync(FRAME_DT)
-        forces, points, normals, separations, layout, handles = self._buffers
-        # PhysX warns on stdout of every read its binding cannot hold whole; that is handled here.
-        with native_output_silenced():
-            count = self._contacts.read_raw_contact_data(forces, points, normals, separations, layout, handles)
-        while count >= len(handles):
+        count = self._read_contacts()
+        while count >= self._capacity:
             # More contact points than the binding holds: a larger one, and the step again from the
             # same positions (they and the velocities are written anew each frame, so it is the same step).
-            self._bind_contacts(4 * len(handles))
+            self._bind_contacts(4 * self._capacity)
             self._write_positions()
             self._physx.step_sync(FRAME_DT)
-            forces, points, normals, separations, layout, handles = self._buffers
-            with native_output_silenced():
-                count = self._contacts.read_raw_contact_data(forces, points, normals, separations, layout,
-                                                             handles)
+            count = self._read_contacts()
+        handles = self._buffers[-1]
         objects = self._objects(handles[:count].ravel()).reshape(-1, 2)
         self._stats = {"contact_points": int(count)}
         return canonical(objects[:, 0], objects[:, 1])

@@ -149,6 +149,11 @@ def uses_every_core(name: str, params: dict | None = None) -> bool:
     return name in EVERY_CORE or bool((params or {}).get("parallel"))
 
 
+def ours_on_one_thread(name: str) -> bool:
+    """One of our backends as the engines run, on one thread: what every study sets against them."""
+    return of_kind(name, "own") and not uses_every_core(name)
+
+
 def of_kind(name: str, *kinds: Kind) -> bool:
     """Whether the backend's family is of one of these kinds ("own", "essay", "engine", "particle", "library")."""
     return family(name).kind in kinds

@@ -15,7 +15,6 @@ FloatArray = npt.NDArray[np.float64]
 ESSAY_BOX: tuple[float, float, float, float] = (0.0, 0.0, 2000.0, 2000.0)
 
 
-
 def shown(value: object) -> str:
     """A value as an error message shows it: numpy scalars as plain numbers (numpy 2's repr
     would print np.float64(-1.0)), everything else as repr."""

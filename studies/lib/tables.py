@@ -25,7 +25,7 @@ def ours_against_engines(table: pd.DataFrame) -> str | None:
     (the physics engines' broad phases; scipy's k-d tree is a library, not an engine), twice: end
     to end per frame (and on update + pairs), and our update + pairs against the engine's own
     measure of its broad phase, where engines report one. None unless both kinds ran."""
-    ours = [b for b in table.index if engines.of_kind(b, "own") and not engines.uses_every_core(b)]
+    ours = [b for b in table.index if engines.ours_on_one_thread(b)]
     rivals = [b for b in table.index if engines.of_kind(b, "engine")]
     if not ours or not rivals:
         return None

@@ -94,7 +94,7 @@ def warm_up(backend: str) -> None:
     must crash in a child, not in the study. Nor are our parallel kernels: running one here
     starts numba's thread pool (TBB) in this process, and the children are forked from a worker
     thread, where TBB's state is undefined in the child; each child loads them from the cache."""
-    if not engines.of_kind(backend, "own") or engines.uses_every_core(backend):
+    if not engines.ours_on_one_thread(backend):
         return
     rng = np.random.default_rng(0)
     b = engines.create(backend)
