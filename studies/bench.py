@@ -71,6 +71,7 @@ COHERENCE = {
     "own.grid": ({"coherent": False}, {"coherent": True}),
     "own.sap": ({"incremental": False}, {"incremental": True}),
     "own.quadtree": ({"coherent": False}, {"coherent": True}),
+    "own.bvh": ({"coherent": False}, {"coherent": True}),
 }
 
 

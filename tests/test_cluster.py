@@ -72,6 +72,9 @@ def test_a_two_worker_cluster_gives_the_rows_of_the_local_run(tmp_path, monkeypa
     assert pd.read_csv(tmp_path / "cluster" / "results.csv").host.notna().all()
 
 
+MID_JOB_S = 0.3  # a job child alive this long is killed mid-job (the essay's SAP runs for seconds)
+
+
 def children(pid: int) -> list[int]:
     found = []
     for task in Path(f"/proc/{pid}/task").iterdir():
@@ -96,16 +99,27 @@ def test_a_worker_killed_mid_job_costs_that_job_one_retry_and_no_row(tmp_path):
                                              "--no-dashboard"], **quiet))
         workers = started[1:]
         out = tmp_path / "run"
-        # The essay's pure-Python SAP takes a second or more per job at these sizes: long enough to
-        # be caught in the middle of one.
+        # The essay's pure-Python SAP over 30 frames takes a second or more per job at these sizes:
+        # long enough to be caught in the middle of one.
         study = subprocess.Popen([sys.executable, "-m", "studies.scale", "--quick", "--max-log2-n", "10",
-                                  "--backends", "own.grid,essay.sap", "--scheduler", address, "--out", str(out)],
+                                  "--frames", "30", "--backends", "own.grid,essay.sap", "--scheduler", address,
+                                  "--out", str(out)],
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT)
         victim, deadline = workers[0], time.monotonic() + 120
-        while not children(victim.pid):  # the worker has forked a job's child: it is mid-job
-            assert time.monotonic() < deadline and study.poll() is None, "no job started on the first worker"
-            time.sleep(0.05)
-        job_child = children(victim.pid)[0]
+        # The worker has forked a job's child that has run for a while: it is mid-job. (A small job
+        # ends in well under 0.1 s; killed after it sent its outcome, nothing is run again.)
+        first_seen: dict[int, float] = {}
+        while True:
+            now = time.monotonic()
+            alive = children(victim.pid)
+            for pid in alive:
+                first_seen.setdefault(pid, now)
+            lasting = [pid for pid in alive if now - first_seen[pid] > MID_JOB_S]
+            if lasting:
+                break
+            assert now < deadline and study.poll() is None, "no job ran long enough on the first worker"
+            time.sleep(0.02)
+        job_child = lasting[0]
         victim.send_signal(signal.SIGKILL)
         stdout, stderr = study.communicate(timeout=300)
         assert study.returncode == 0, stderr[-3000:]
@@ -124,7 +138,9 @@ def test_a_worker_killed_mid_job_costs_that_job_one_retry_and_no_row(tmp_path):
         assert sizes == [64 << k for k in range(len(sizes))], (dist, backend, sizes)
         assert len(sizes) == 5 or d.sort_values("n").status.iloc[-1] != "ok"
     meta = json.loads((out / "meta.json").read_text())["cluster"]
-    assert len(meta["retried"]) == 1 and meta["retried"][0] in set(jobs.job)
+    # The killed job is run again; so may be one that had just finished there, its outcome not yet
+    # fetched (Dask recomputes a result lost with its worker).
+    assert 1 <= len(meta["retried"]) <= 2 and set(meta["retried"]) <= set(jobs.job), meta["retried"]
     assert rows.status.eq("ok").all(), rows.status.unique()
 
 

@@ -135,8 +135,9 @@ def test_boundary_cases_match_brute_force():
         assert sorted(map(tuple, brute_pairs(pos, np.asarray(radii, dtype=float)).tolist())) == expected
 
 
-def test_quadtree_straddlers_stay_high_and_are_found():
-    # A big circle in the middle straddles every split; small ones around it sit deep.
+def test_quadtree_large_objects_stay_high_and_are_found():
+    # A big circle in the middle sits near the root (cells at least 400 wide: depth 1 of a square
+    # about 1000 wide); the small ones around it sit deep, and the tree splits below it.
     rng = np.random.default_rng(0)
     pos = np.vstack([[500.0, 500.0], rng.uniform(0, 1000, (300, 2))])
     radii = np.concatenate([[200.0], np.full(300, 3.0)])
@@ -145,7 +146,10 @@ def test_quadtree_straddlers_stay_high_and_are_found():
     tree.validate()
     got = tree.pairs()
     assert set(map(tuple, got.tolist())) == set(map(tuple, brute_pairs(pos, radii).tolist()))
-    assert tree.stats()["depth"] >= 3
+    from own.quadtree import LEVEL_MASK
+    level = (tree._work[2] & np.uint64(LEVEL_MASK)).astype(int)[np.argsort(tree._order)]  # by object
+    assert level[0] <= 1 and (level[1:] >= 7).all()
+    assert tree._levels()[0].max() >= 3
 
 
 def test_grid_large_objects_are_found_once_against_small_and_large():
@@ -574,12 +578,13 @@ def test_verlet_default_skin_shrinks_where_lists_live_a_frame_and_stays_where_th
     assert fixed._skin == 10.0  # a skin given is kept
 
 
-def test_quadtree_keeps_its_lattice_while_the_boxes_stay_inside_and_retries_a_failed_repair_later():
-    from own.quadtree import RETRY_REPAIR
+@pytest.mark.parametrize("name", ["own.quadtree", "own.bvh"])
+def test_trees_keep_their_lattice_while_the_boxes_stay_inside_and_retry_a_failed_repair_later(name):
+    from own.coherent import RETRY_REPAIR
 
     scene = generate("uniform", 2000, seed=9)
     rng = np.random.default_rng(9)
-    tree = engines.create("own.quadtree")
+    tree = engines.create(name)
     tree.reset(scene.positions, scene.radii)
     square = tree._lattice.copy()
     tree.update(scene.positions + 0.01)  # inside the slack: same lattice, a cheap repair
@@ -592,6 +597,6 @@ def test_quadtree_keeps_its_lattice_while_the_boxes_stay_inside_and_retries_a_fa
         tree.validate()
         assert set(map(tuple, tree.pairs().tolist())) == set(map(tuple, brute_pairs(positions, scene.radii).tolist()))
     assert all(s == -1 for s in tried)
-    assert tree._waited == 0  # tried again after RETRY_REPAIR frames (and gave up again)
+    assert tree._schedule.waited == 0  # tried again after RETRY_REPAIR frames (and gave up again)
     tree.update(scene.positions * 0.5)  # the boxes span less than half the square: fitted afresh
     assert tree._lattice[2] < square[2]

@@ -122,7 +122,7 @@ def test_bench_coherence_sets_each_sorted_structure_from_scratch_beside_repaired
     printed = done.stdout.split("\n\n")[0]
     lines = {line.split()[1]: line.split() for line in printed.splitlines()[1:]}
     assert list(pd.read_csv(tmp_path / "bench.csv").backend) == list(lines)
-    assert list(lines) == ["own.grid", "own.sap", "own.quadtree"]
+    assert list(lines) == ["own.grid", "own.sap", "own.quadtree", "own.bvh"]
     for n, _, scratch_ms, coherent_ms, ratio, repaired, moved_by_repair, changed_cell in lines.values():
         assert n == "2048" and float(scratch_ms) > 0 and float(coherent_ms) > 0
         assert ratio.endswith("x")  # of the unrounded times, so only about that of the printed ones

@@ -31,10 +31,10 @@ def draw(name, **params):
     # Centres span 80: cells of 30 give 3 x 3.
     ("own.grid", {"cell": 30.0}, {"cells": 9}),
     # The lattice square is the boxes' (5 to 95) widened by a sixteenth on each side: -0.625 to
-    # 100.625. Root (the middle circle straddles it and stays), its 4 children, and the lower-left
-    # child's 4 (both corner circles fall in its lower-left quarter, where each straddles a middle
-    # line of the next level, so that quarter is a leaf though it holds two: capacity 1).
-    ("own.quadtree", {"capacity": 1}, {"nodes": 9}),
+    # 100.625, so each circle (10 wide) sits in a cell of depth 3 (12.66 wide). The root; the two
+    # corner circles' cells share one of depth 2, the other two's one of depth 1; and the four
+    # leaves, each circle's own cell: 7 nodes, all in different cells.
+    ("own.quadtree", {"capacity": 1}, {"nodes": 7}),
     ("own.sap", {"axis": "x"}, {"intervals": 4}),
     ("own.brute", {}, {}),
 ])
