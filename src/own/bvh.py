@@ -31,16 +31,20 @@ MORTON_BITS = 16  # per axis: 2^16 lattice steps over the lattice square
 def centre_codes(xy, sr, x0, y0, size, depth, codes):
     """Into `codes`: the Morton code of each centre on the 2^depth x 2^depth lattice over the
     square (x0, y0, size); all 0 where the square is a point or its scale overflows. (A key
-    kernel of own/tree.py: the radii `sr` are not needed.)"""
+    kernel of own/tree.py: the radii `sr` are not needed.) Two passes, the lattice steps packed
+    into `codes` first: each pass vectorises, where one loop doing both did not (3x slower)."""
     top = float((1 << depth) - 1)
     scale = (top + 1.0) / size if size > 0 else 0.0
     if not (scale > 0 and np.isfinite(scale)):
         codes[:] = 0
         return
     for i in range(xy.shape[0]):
-        qx = min(max((xy[i, 0] - x0) * scale, 0.0), top)
-        qy = min(max((xy[i, 1] - y0) * scale, 0.0), top)
-        codes[i] = interleave(np.uint64(qx), np.uint64(qy))
+        qx = np.int64(min(max((xy[i, 0] - x0) * scale, 0.0), top))
+        qy = np.int64(min(max((xy[i, 1] - y0) * scale, 0.0), top))
+        codes[i] = np.uint64(qx | (qy << 32))
+    for i in range(xy.shape[0]):
+        c = codes[i]
+        codes[i] = interleave(c & np.uint64(0xFFFFFFFF), c >> np.uint64(32))
 
 
 @nb.njit(cache=True)

@@ -20,6 +20,7 @@ from engines.base import BroadPhase
 from .coherent import RepairSchedule, lattice_frame, resort
 from .common import PairCollector, gather, scan_mask
 from .morton import bit_length
+from numba.cpython.unsafe.numbers import trailing_zeros
 
 START, END, CHILD = range(3)
 NO_CHILD = -1
@@ -125,12 +126,20 @@ def _leaf_self(order, box, s, e, buf, count):
 def _leaf_cross(order, box, bounds, nodes, u, v, buf, count):
     """Pairs between the objects of leaves u and v, whose bounds overlap: each of u's objects
     that meets v's bounds (where leaves touch along an edge, a few) is scanned against all of v's
-    (measured faster than also picking v's objects that meet u's bounds: the scans vectorise)."""
+    (measured faster than also picking v's objects that meet u's bounds: the scans vectorise).
+    u's objects are picked 64 at a time into a bit mask, branch-free."""
     vx0, vy0, vx1, vy1 = bounds[v, 0], bounds[v, 1], bounds[v, 2], bounds[v, 3]
     s, e = nodes[v, START], nodes[v, END]
-    for a in range(nodes[u, START], nodes[u, END]):
-        if (box[0, a] <= vx1) & (box[1, a] >= vx0) & (box[2, a] <= vy1) & (box[3, a] >= vy0):
-            count = scan_mask(box, order, a, s, e, buf, count)
+    us, ue = nodes[u, START], nodes[u, END]
+    for c in range(us, ue, 64):
+        mask = np.uint64(0)
+        for t in range(min(64, ue - c)):
+            a = c + t
+            meets = (box[0, a] <= vx1) & (box[1, a] >= vx0) & (box[2, a] <= vy1) & (box[3, a] >= vy0)
+            mask |= np.uint64(meets) << np.uint64(t)
+        while mask:
+            count = scan_mask(box, order, c + trailing_zeros(mask), s, e, buf, count)
+            mask &= mask - np.uint64(1)
     return count
 
 
