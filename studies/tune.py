@@ -24,7 +24,9 @@ import pandas as pd
 
 import engines
 from engines.knobs import frames_needed
+from own.bvh import LinearBvh
 from own.grid import GRID_CELL_FACTORS, MAX_CELLS_PER_OBJECT
+from own.quadtree import Quadtree
 from own.verlet import SKIN_FACTORS
 from own.sap import SPARSE_PAIRS_PER_OBJECT
 from scenes import FAMILIES as RECORDED_FAMILIES
@@ -257,12 +259,12 @@ def write_tuning_md(table: pd.DataFrame, curves: pd.DataFrame, path: Path, args)
         "- `own.grid`: cell = one diameter of the largest radius of at most 4 median radii, then",
         f"  enlarged until there are at most {MAX_CELLS_PER_OBJECT} cells per object (`default_cell`, `MAX_CELLS_PER_OBJECT`).",
         "  `own.grid_incremental` takes the same rule.",
-        "- `own.quadtree`: capacity 32, maximum depth 16.",
+        f"- `own.quadtree`: capacity {Quadtree.defaults['capacity']}, maximum depth {Quadtree.defaults['max_depth']}.",
         "- `own.sap` and `own.sap_incremental`: strips where they at least halve the estimated sweep-axis",
         "  overlaps (then the axis along which the boxes extend further), else the axis along which the centres",
         f"  vary most and the sparse sweep while last frame found at most {SPARSE_PAIRS_PER_OBJECT} pairs per object",
         "  (`SPARSE_PAIRS_PER_OBJECT`) and float32 tells the objects apart.",
-        "- `own.bvh`: at most 16 objects per leaf.",
+        f"- `own.bvh`: at most {LinearBvh.defaults['leaf_size']} objects per leaf.",
         "- `own.verlet`: skin a quarter of a mean diameter, halved after a list that lived one frame, grown back after",
         "  one that lived long (only the skin is swept: its other knobs give up exactness).",
         "",

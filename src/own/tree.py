@@ -2,7 +2,7 @@
 frame to frame, the node table, its bounds and the pair search.
 
 Objects are sorted by a key that starts with the Morton code of a lattice cell (each tree has its
-own key, see `key_kernel`), so that every subtree is one contiguous slice of the sorted objects.
+own key kernel, see tree_builder), so that every subtree is one contiguous slice of the sorted objects.
 The node table has columns START, END (the node's slice) and CHILD: a binary tree whose two
 children, CHILD and CHILD + 1, are allocated side by side after their parent, NO_CHILD in a leaf,
 whose slice is its objects. Every object is in exactly one leaf. Node bounds are the exact
@@ -14,13 +14,13 @@ from __future__ import annotations
 
 import numba as nb
 import numpy as np
+from numba.cpython.unsafe.numbers import trailing_zeros
 
 from engines.base import BroadPhase
 
 from .coherent import RepairSchedule, lattice_frame, resort
-from .common import PairCollector, gather, scan_mask
+from .common import PairCollector, gather, meet_mask, scan_mask
 from .morton import bit_length
-from numba.cpython.unsafe.numbers import trailing_zeros
 
 START, END, CHILD = range(3)
 NO_CHILD = -1
@@ -128,15 +128,10 @@ def _leaf_cross(order, box, bounds, nodes, u, v, buf, count):
     that meets v's bounds (where leaves touch along an edge, a few) is scanned against all of v's
     (measured faster than also picking v's objects that meet u's bounds: the scans vectorise).
     u's objects are picked 64 at a time into a bit mask, branch-free."""
-    vx0, vy0, vx1, vy1 = bounds[v, 0], bounds[v, 1], bounds[v, 2], bounds[v, 3]
     s, e = nodes[v, START], nodes[v, END]
     us, ue = nodes[u, START], nodes[u, END]
     for c in range(us, ue, 64):
-        mask = np.uint64(0)
-        for t in range(min(64, ue - c)):
-            a = c + t
-            meets = (box[0, a] <= vx1) & (box[1, a] >= vx0) & (box[2, a] <= vy1) & (box[3, a] >= vy0)
-            mask |= np.uint64(meets) << np.uint64(t)
+        mask = meet_mask(box, c, min(64, ue - c), bounds[v, 0], bounds[v, 2], bounds[v, 1], bounds[v, 3])
         while mask:
             count = scan_mask(box, order, c + trailing_zeros(mask), s, e, buf, count)
             mask &= mask - np.uint64(1)
