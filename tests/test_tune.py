@@ -62,6 +62,21 @@ def test_the_defaults_are_a_candidate_and_best_means_fastest_measured():
     assert not slower.default_is_best and slower.setting == "k=2" and slower.loss == pytest.approx(1.5)
 
 
+def test_a_best_setting_that_is_the_defaults_is_reported_as_the_defaults_without_a_loss():
+    scene = generate("uniform", 50, seed=1)
+    default_leaf = engines.backend_class("own.bvh").defaults["leaf_size"]
+    steps = []
+
+    def measure(params, step):
+        steps.append(step)
+        return trial({"leaf_size": 1.0, "default": 3.0}.get(step, 9.0) if params.get("leaf_size") != 4 else 2.0)
+
+    knob = Knob("leaf_size", lambda s: [default_leaf, 4], "objects per leaf")
+    tuned = tune_backend(scene, "own.bvh", measure, knobs=(knob,))
+    assert tuned.default_is_best and tuned.setting == "the defaults" and tuned.loss == 0.0
+    assert "best" not in steps  # the same setting is not measured again under another name
+
+
 def test_a_period_is_never_measured_over_fewer_frames_than_it_spans():
     scene = generate("uniform", 50, seed=1)
     asked = []

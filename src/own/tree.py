@@ -189,8 +189,8 @@ def tree_pairs(order, box, nodes, bounds, buf):
 
 class MortonTree(BroadPhase):
     """A tree over Morton-sorted objects, built anew every frame from last frame's order. A
-    subclass sets `build` (made by tree_builder), `_depth` and `_capacity`; `coherent=False` in
-    its params sorts from the input order every frame, to measure what coherence saves."""
+    subclass sets `build` (made by tree_builder), `_depth` and `_capacity`, and has a `coherent`
+    parameter: False sorts from the input order every frame, to measure what coherence saves."""
 
     build = None
 
@@ -210,7 +210,7 @@ class MortonTree(BroadPhase):
         self._update(positions)
 
     def _update(self, positions):
-        if not self.params.get("coherent", True):
+        if not self.params["coherent"]:
             self._order[:1] = -1  # no last order (as before the first frame): sort from the input order
             self._lattice[:] = 0.0  # and a lattice fitted to this frame alone
         repair = self._schedule.due(self._order[:1].min(initial=0) >= 0)

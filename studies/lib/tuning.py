@@ -95,6 +95,10 @@ def tune_backend(scene: Scene, backend: str, measure: Measure, knobs: tuple[Knob
             best = found[1]
     if not with_default:
         return Tuned(backend, params if best else {}, best, None, sweeps)
+    # A best setting that is the defaults themselves (every knob at its default value) is the
+    # defaults: measured twice, its two runs' noise would read as a loss of the defaults.
+    if best is not None and {**engines.backend_class(backend).defaults, **params} == engines.backend_class(backend).defaults:
+        best = None
     # The best of many noisy points is biased low (the winner's curse): the loss of the default
     # comes from the best setting and the default measured again, one after the other.
     if best is not None:
