@@ -22,7 +22,7 @@ from .coherent import box_frame
 from .morton import interleave
 from .small import SmallScenes
 from .statics import StaticsApart
-from .tree import CHILD, END, NO_CHILD, START, MortonTree, add_children, split_at_highest_bit, tree_builder
+from .tree import END, START, MortonTree, add_children, new_table, split_at_highest_bit, tree_builder
 
 MORTON_BITS = 16  # per axis: 2^16 lattice steps over the lattice square
 
@@ -62,10 +62,9 @@ def bvh_nodes(codes, depth, leaf_size):
     """The binary radix tree over the sorted codes (a node kernel of own/tree.py), depth first:
     nodes close in the sorted order are close in memory, as the traversal visits them."""
     n = codes.shape[0]
-    nodes = np.empty((max(2 * n - 1, 0), 3), dtype=np.int64)
+    nodes = new_table(n)
     if n == 0:
         return nodes
-    nodes[0, START], nodes[0, END], nodes[0, CHILD] = 0, n, NO_CHILD
     count = 1
     pending = np.empty(128, dtype=np.int64)  # nodes still to split: at most one per level, plus one
     pending[0] = 0

@@ -26,7 +26,7 @@ from engines.knobs import Knob, fixed
 from .morton import bit_length, interleave
 from .small import SmallScenes
 from .statics import StaticsApart
-from .tree import CHILD, END, NO_CHILD, START, MortonTree, add_children, split_at_highest_bit, tree_builder
+from .tree import END, START, MortonTree, add_children, new_table, split_at_highest_bit, tree_builder
 
 # Keys are (Morton code of the cell, padded to depth D) << LEVEL_BITS | depth: 2 D + 5 bits.
 LEVEL_BITS = 5
@@ -66,10 +66,9 @@ def quadtree_keys(xy, sr, x0, y0, size, depth, keys):
 def quadtree_nodes(keys, depth, capacity):
     """The node table over the sorted keys, depth first (a node kernel of own/tree.py)."""
     n = keys.shape[0]
-    nodes = np.empty((max(2 * n - 1, 0), 3), dtype=np.int64)
+    nodes = new_table(n)
     if n == 0:
         return nodes
-    nodes[0, START], nodes[0, END], nodes[0, CHILD] = 0, n, NO_CHILD
     count = 1
     pending = np.empty(4 * MAX_DEPTH + 8, dtype=np.int64)  # nodes still to split: about one per level
     pending[0] = 0

@@ -80,6 +80,16 @@ def split_at_highest_bit(keys, s, e):
 
 
 @nb.njit(cache=True, inline="always")
+def new_table(n):
+    """A node table with room for a binary tree over n objects (2 n - 1 nodes), its root, every
+    object, in row 0."""
+    nodes = np.empty((max(2 * n - 1, 0), 3), dtype=np.int64)
+    if n > 0:
+        nodes[0, START], nodes[0, END], nodes[0, CHILD] = 0, n, NO_CHILD
+    return nodes
+
+
+@nb.njit(cache=True, inline="always")
 def add_children(nodes, count, k, mid):
     """Split node k's slice at `mid` into two children at rows count, count + 1; the new count."""
     s, e = nodes[k, START], nodes[k, END]
