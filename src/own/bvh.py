@@ -51,9 +51,9 @@ def centre_codes(xy, sr, x0, y0, size, depth, codes):
 def morton_codes(positions: np.ndarray) -> np.ndarray:
     """32-bit Morton code of each centre on the lattice over the centres' square."""
     n = positions.shape[0]
-    codes = np.zeros(n, dtype=np.uint64)
-    x0, y0, size = box_frame(positions, np.zeros(n))
-    centre_codes(positions, np.zeros(n), x0, y0, size, MORTON_BITS, codes)
+    codes, points = np.zeros(n, dtype=np.uint64), np.zeros(n)  # centres as boxes of radius 0
+    x0, y0, size = box_frame(positions, points)
+    centre_codes(positions, points, x0, y0, size, MORTON_BITS, codes)
     return codes
 
 

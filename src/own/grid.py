@@ -197,9 +197,12 @@ def grid_build(xy, radii, order, last_key, layout, limit, start, key, ids, centr
 
 @nb.njit(cache=True, inline="always")
 def scan_circles(centres, radii, ids, a, s, e, buf, count):
-    """common.scan_boxes for slots that hold centres and radii (or one radius for all, see
-    common.radius_of): each box is bounded as everywhere (x - r, x + r), a few flops that cost
-    less than moving boxes twice the size through memory."""
+    """Test slot a against slots s..e-1, which hold centres and radii (or one radius for all, see
+    common.radius_of), and emit the overlapping ones as pairs of `ids`; returns the new pair count.
+    Each box is bounded as everywhere (x - r, x + r), a few flops that cost less than moving boxes
+    twice the size through memory. Branch-free: every candidate is written at row `count`, which
+    only a hit keeps. Scans are short and a good share of them hit, so a test-then-emit branch is
+    mispredicted often: measured 1.9x slower on a quadtree's leaves."""
     x, y, r = centres[a, 0], centres[a, 1], radius_of(radii, a)
     ax0, ax1, ay0, ay1, i = x - r, x + r, y - r, y + r, ids[a]
     for b in range(s, e):
