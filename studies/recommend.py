@@ -2,8 +2,8 @@
 
 Give a scene file (`--scene FILE.csv`) or describe the scene (`--n`, `--dist`, `--radius` /
 `--radii`, `--speed`). Every available backend runs short trials on the stepped scene; those with
-knobs are tuned on it; all are ranked by median time per frame end to end, with the spread over
-repeats. Backends whose spreads overlap are tied, not ranked; a backend that missed any pair is
+knobs are tuned on it; all are ranked by time per frame end to end over a run (each repeat's
+mean frame, the median over repeats), with the spread over repeats. Backends whose spreads overlap are tied, not ranked; a backend that missed any pair is
 flagged and never recommended. Prints a verdict in plain words and writes it as Markdown with a
 figure, the rows and meta.json to `--out`.
 """
@@ -103,7 +103,7 @@ class Entry:
 
 def rank(entries: list[Entry]) -> list[list[Entry]]:
     """Eligible entries in groups of ties: each group holds the entries whose spread overlaps
-    that of the group's fastest member; groups are in order of median time."""
+    that of the group's fastest member; groups are in order of time per frame."""
     ordered = sorted((e for e in entries if e.eligible), key=lambda e: e.trial.median_ms)
     groups: list[list[Entry]] = []
     for e in ordered:
@@ -213,7 +213,7 @@ def why(win: Entry, runner: Entry | None, traits: Traits) -> str:
 
 
 def plot(entries: list[Entry], groups: list[list[Entry]], path: Path, title: str) -> None:
-    """Every backend tried, fastest first: a point at its median time per frame on a log axis with
+    """Every backend tried, fastest first: a point at its time per frame on a log axis with
     its spread over repeats as a line, the winner's group filled; one stopped before finishing a
     trial is a hollow grey point at its one frame (where it finished one), named with why."""
     finished = sorted((e for e in entries if e.trial.ok), key=lambda e: e.trial.median_ms)
@@ -253,7 +253,7 @@ def plot(entries: list[Entry], groups: list[list[Entry]], path: Path, title: str
     if times:
         ax.set_xlim(min(times) / 2, max(times) * 2)
     ax.grid(axis="x", which="both", alpha=0.3)
-    ax.set_xlabel("ms per frame, end to end (point: median; line: fastest to slowest repeat;\n"
+    ax.set_xlabel("ms per frame, end to end (point: a repeat's mean frame, median over repeats; line: fastest to slowest repeat;\n"
                   "filled: the winner and its ties; hollow grey: the one frame of a backend stopped after it)",
                   fontsize=8)
     ax.set_title(title, fontsize=9)

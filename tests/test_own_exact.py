@@ -559,18 +559,32 @@ def test_grid_cells_are_sized_to_the_objects_under_the_bound_not_to_a_huge_one()
     assert np.array_equal(np.sort(keys(grid.pairs(), 1000)), keys(brute_pairs(positions, radii), 1000))
 
 
-def test_verlet_default_skin_shrinks_where_lists_live_a_frame_and_stays_where_they_last():
-    fast = simulate(generate("uniform", 600, seed=3, speed=3000.0), frames=12)
-    calm = simulate(generate("uniform", 600, seed=3), frames=12)
-    for traj, shrinks in ((fast, True), (calm, False)):
+def test_verlet_default_skin_follows_the_motion_and_the_density():
+    """Fast motion: two lists in a row that lived one frame drop the skin to zero; it is tried
+    again after PROBE_AFTER rebuilds, and after a failed try twice as many. The essay's motion at
+    its density: lists live, but their skin adds pairs to every frame's filter, so it is halved.
+    A still scene keeps the default. Every frame exact throughout."""
+    from own.verlet import MIN_SHARE, PROBE_AFTER
+
+    fast = simulate(generate("uniform", 600, seed=3, speed=3000.0), frames=2 + PROBE_AFTER + 4)
+    calm = simulate(generate("uniform", 600, seed=3), frames=30)
+    still = generate("uniform", 600, seed=3)
+    skins = {}
+    for label, frames, radii in (("fast", fast.positions, fast.scene.radii), ("calm", calm.positions, calm.scene.radii),
+                                 ("still", [still.positions] * 12, still.radii)):
         verlet = engines.create("own.verlet")
-        verlet.reset(traj.positions[0], traj.scene.radii)
-        default = verlet._default_skin
-        for f in range(1, traj.frames):
-            verlet.update(traj.positions[f])
+        verlet.reset(frames[0], radii)
+        skins[label] = []
+        for positions in frames[1:]:
+            verlet.update(positions)
             verlet.validate()
-            np.testing.assert_array_equal(np.sort(keys(verlet.pairs(), 600)), keys(traj.box_pairs[f], 600))
-        assert (verlet._skin < default) == shrinks, (verlet._skin, default)
+            np.testing.assert_array_equal(np.sort(keys(verlet.pairs(), 600)), keys(brute_pairs(positions, radii), 600))
+            skins[label].append(verlet._skin / verlet._default_skin)
+        if label == "fast":
+            assert verlet._probe_after == 2 * PROBE_AFTER  # the one try at a skin failed
+    assert skins["fast"][:2] == [1.0, 0.0] and skins["fast"].count(1.0) == 2, skins["fast"]  # the start, one try
+    assert MIN_SHARE <= skins["calm"][-1] < 1.0, skins["calm"]
+    assert set(skins["still"]) == {1.0}
     fixed = engines.create("own.verlet", skin=10.0)
     fixed.reset(fast.positions[0], fast.scene.radii)
     for frame in fast.positions[1:]:

@@ -90,6 +90,32 @@ def test_a_period_is_never_measured_over_fewer_frames_than_it_spans():
     assert [p["every"] for step, p in asked if step == "every"] == [2, 5, 10]
     assert frames_needed((every,), {"every": 20}) == 20 and frames_needed((every,), {}) == 1
     assert any(k.period for k in engines.backend_class("own.verlet").sweeps)
+    # The skin trades filtering against rebuilds: every trial of own.verlet, its defaults' too,
+    # spans a list's lifetime, or the skin that just outlives a short trial would win.
+    from own.verlet import TRIAL_FRAMES
+    verlet = engines.backend_class("own.verlet").sweeps
+    assert frames_needed(verlet, {}) == frames_needed(verlet, {"skin": 1.0}) == TRIAL_FRAMES > 10
+
+
+def test_a_trial_weighs_a_frame_over_the_run_so_a_rebuild_in_few_frames_counts():
+    """A Verlet-like cost (a rebuild of 20 ms once in 10 frames of 1 ms): its median frame is
+    1 ms, but a run costs about 3 ms a frame, and that is what a choice between settings compares."""
+    from studies.lib.harness import Job, Outcome
+    from studies.lib.results import COLUMNS
+
+    rows = []
+    for repeat in range(3):
+        for frame in range(1, 11):
+            ms = 20.0 if frame == 5 else 1.0 + 0.1 * repeat
+            row = dict.fromkeys(COLUMNS)
+            row.update(backend="x", params="{}", repeat=repeat, frame=frame, status="ok", reports="boxes", stats="{}",
+                       t_update_s=ms / 1e3, t_pairs_s=0.0, t_narrow_s=0.0, t_total_s=ms / 1e3, t_setup_s=0.1,
+                       candidates=0, missed=0, false_positives=0.0)
+            rows.append(row)
+    got = Trial.of(Job("x", {}, repeats=3, frames=10), Outcome("x", "ok", rows))
+    # Each repeat's mean frame: 2.9, 2.99 and 3.08 ms; their median, and the spread between them.
+    assert got.median_ms == pytest.approx(2.99) and got.low_ms == pytest.approx(2.9)
+    assert got.high_ms == pytest.approx(3.08) and got.frame_ms == pytest.approx(1.0)
 
 
 def test_every_knob_has_values_for_odd_scenes():

@@ -26,11 +26,18 @@ class Knob:
     # frames): a point measured over fewer frames than its value never pays that work, so it is
     # measured over at least that many (frames_needed), or not at all.
     period: bool = False
+    # Every trial of the backend, its defaults' too, spans at least this many timed frames: the
+    # work this knob trades against is done once in so many frames (a Verlet list's rebuild, once
+    # in about 40 frames of the essay's motion at its default skin), and a shorter trial, which
+    # starts from a structure built untimed, would favour the setting that just outlives it.
+    trial_frames: int = 1
 
 
 def frames_needed(knobs: tuple[Knob, ...], params: dict[str, Any]) -> int:
-    """The fewest timed frames that measure `params` fairly: the largest period among them (1 if none)."""
-    return max([1] + [int(params[k.param]) for k in knobs if k.period and params.get(k.param) is not None])
+    """The fewest timed frames that measure `params` fairly: the largest period among them and
+    the largest `trial_frames` of the backend's knobs (1 if none)."""
+    return max([1] + [k.trial_frames for k in knobs]
+               + [int(params[k.param]) for k in knobs if k.period and params.get(k.param) is not None])
 
 
 def mean_diameter(scene: Scene) -> float:

@@ -277,7 +277,8 @@ def summarise(rows: pd.DataFrame, by: list[str], first: Iterable[str] = (), stat
 
     Over the group's "ok" rows: the median and interquartile range of each stage in ms
     (`update_ms`, `update_iqr_ms`, ... `total_ms`), the quartiles of the total, `low_ms` and
-    `high_ms` (the fastest and slowest repeat's median total), medians of the pair counts, the
+    `high_ms` (the fastest and slowest repeat's median total), `run_ms` (the median over repeats of a
+    repeat's mean total: a frame's cost over a run) with `run_low_ms` and `run_high_ms`, medians of the pair counts, the
     mean false positives and candidates beyond those promised per frame (`extra_per_frame`),
     candidates per true pair over the verified frames (`verified` counts them), misses summed
     (and `contacts`, the true pairs summed; `worst_missed_share`, the worst frame's missed share) (`box_missed` stays empty for backends
@@ -304,9 +305,14 @@ def summarise(rows: pd.DataFrame, by: list[str], first: Iterable[str] = (), stat
     # The engine's own measure of its broad phase, where it has one (empty otherwise).
     engine = ok["t_engine_broadphase_s"] * 1e3
     table["engine_broadphase_ms"] = engine.groupby([ok[c] for c in by], sort=False, dropna=False).median()
-    per_repeat = total.groupby([ok[c] for c in by] + [ok["repeat"]], sort=False, dropna=False).median()
-    repeat_medians = per_repeat.groupby(level=list(range(len(by))), sort=False, dropna=False)
+    by_repeat = total.groupby([ok[c] for c in by] + [ok["repeat"]], sort=False, dropna=False)
+    repeat_medians = by_repeat.median().groupby(level=list(range(len(by))), sort=False, dropna=False)
     table["low_ms"], table["high_ms"] = repeat_medians.min(), repeat_medians.max()
+    # What a frame costs over a run, work done once in many frames included (a Verlet list's
+    # rebuild, in a minority of frames, is outside the median frame): each repeat's mean frame.
+    repeat_means = by_repeat.mean().groupby(level=list(range(len(by))), sort=False, dropna=False)
+    table["run_ms"] = repeat_means.median()
+    table["run_low_ms"], table["run_high_ms"] = repeat_means.min(), repeat_means.max()
     for col in ("candidates", "true_pairs", "box_pairs"):
         table[col] = g[col].median()
     table["false_positives"] = g["false_positives"].mean()
