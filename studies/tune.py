@@ -27,7 +27,8 @@ from engines.knobs import frames_needed
 from own.bvh import LinearBvh
 from own.grid import GRID_CELL_FACTORS, MAX_CELLS_PER_OBJECT
 from own.quadtree import Quadtree
-from own.verlet import DEFAULT_SKIN_DIAMETERS, SHRINK_GAIN, SKIN_FACTORS, TRIAL_FRAMES
+from own.skin import SHRINK_GAIN
+from own.verlet import DEFAULT_SKIN_DIAMETERS, SKIN_FACTORS, TRIAL_FRAMES
 from own.sap import SPARSE_PAIRS_PER_OBJECT
 from scenes import FAMILIES as RECORDED_FAMILIES
 from scenes import Scene, generate

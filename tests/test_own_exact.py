@@ -326,7 +326,8 @@ def test_coherent_sorts_repair_small_motion_and_resort_after_large(name):
     backend = engines.create(name)
     backend.reset(traj.positions[0], traj.scene.radii)
     assert backend.stats()["swaps"] == -1  # the first frame is a full sort
-    backend.update(traj.positions[1])
+    # Moved past a tree's skin (a tree is kept while no object has moved skin / 2): built again.
+    backend.update(traj.positions[1] + getattr(backend, "_skin", 0.0))
     assert 0 <= backend.stats()["swaps"] < 500  # a cheap repair
     backend.validate()
     shuffled = np.random.default_rng(0).permutation(traj.positions[2])
@@ -516,6 +517,39 @@ def test_verlet_list_is_exact_under_its_rebuild_rule_across_stepped_frames(scene
             assert np.array_equal(np.sort(keys(got, n)), expected)
 
 
+@pytest.mark.parametrize("name", ["own.quadtree", "own.bvh"])
+@settings(max_examples=40)
+@given(scene=any_scene, steps=st.lists(st.sampled_from([0.0, 0.01, 0.3, 3.0, 40.0]), min_size=1, max_size=10),
+       seed=st.integers(0, 2**16))
+def test_trees_are_exact_while_kept_under_their_skin_across_stepped_frames(name, scene, steps, seed):
+    """Steps within the trees' skin (the tree kept, its bounds refitted, its listed leaf pairs
+    tested) and past it (built again, the skin adapting): every frame's pairs are the box overlaps."""
+    positions, radii = scene
+    positions, radii = np.asarray(positions, dtype=float).reshape(-1, 2), np.asarray(radii, dtype=float)
+    rng = np.random.default_rng(seed)
+    tree = engines.create(name)
+    tree.small_scene_n = 0  # the structure at every n, kept or built
+    tree.reset(positions, radii)
+    for step in steps:
+        positions = positions + rng.uniform(-step, step, positions.shape)
+        tree.update(positions)
+        tree.validate()
+        n = len(positions)
+        assert np.array_equal(np.sort(keys(tree.pairs(), n)), keys(brute_pairs(positions, radii), n))
+
+
+def test_trees_keep_their_structure_while_nothing_moves_past_the_skin():
+    traj = simulate(generate("uniform", 2000, seed=4, speed=1.0), frames=6)
+    tree = engines.create("own.bvh")
+    tree.reset(traj.positions[0], traj.scene.radii)
+    for f in range(1, traj.frames):
+        tree.update(traj.positions[f])
+        assert tree.stats()["reused"] == 1 and tree.stats()["builds"] == 1  # slow motion: one build
+        np.testing.assert_array_equal(np.sort(keys(tree.pairs(), 2000)), keys(traj.box_pairs[f], 2000))
+    tree.update(traj.positions[0] + 3 * tree._skin)  # past the skin: built again
+    assert tree.stats()["reused"] == 0 and tree.stats()["builds"] == 2
+
+
 def test_verlet_list_rebuilt_every_k_frames_misses_pairs_when_objects_outrun_the_skin():
     """The approximate setting: measured, not assumed, to lose pairs on fast motion."""
     traj = simulate(generate("uniform", 400, radius=5.0, speed=3000.0, seed=2), 12)
@@ -564,7 +598,7 @@ def test_verlet_default_skin_follows_the_motion_and_the_density():
     again after PROBE_AFTER rebuilds, and after a failed try twice as many. The essay's motion at
     its density: lists live, but their skin adds pairs to every frame's filter, so it is halved.
     A still scene keeps the default. Every frame exact throughout."""
-    from own.verlet import MIN_SHARE, PROBE_AFTER
+    from own.skin import MIN_SHARE, PROBE_AFTER
 
     fast = simulate(generate("uniform", 600, seed=3, speed=3000.0), frames=2 + PROBE_AFTER + 4)
     calm = simulate(generate("uniform", 600, seed=3), frames=30)
@@ -581,7 +615,7 @@ def test_verlet_default_skin_follows_the_motion_and_the_density():
             np.testing.assert_array_equal(np.sort(keys(verlet.pairs(), 600)), keys(brute_pairs(positions, radii), 600))
             skins[label].append(verlet._skin / verlet._default_skin)
         if label == "fast":
-            assert verlet._probe_after == 2 * PROBE_AFTER  # the one try at a skin failed
+            assert verlet._schedule.probe_after == 2 * PROBE_AFTER  # the one try at a skin failed
     assert skins["fast"][:2] == [1.0, 0.0] and skins["fast"].count(1.0) == 2, skins["fast"]  # the start, one try
     assert MIN_SHARE <= skins["calm"][-1] < 1.0, skins["calm"]
     assert set(skins["still"]) == {1.0}
@@ -601,7 +635,8 @@ def test_trees_keep_their_lattice_while_the_boxes_stay_inside_and_retry_a_failed
     tree = engines.create(name)
     tree.reset(scene.positions, scene.radii)
     square = tree._lattice.copy()
-    tree.update(scene.positions + 0.01)  # inside the slack: same lattice, a cheap repair
+    # Past the tree's skin (built again) but inside the lattice's slack: same lattice, a cheap repair.
+    tree.update(scene.positions + tree._skin)
     assert np.array_equal(tree._lattice, square) and tree.stats()["swaps"] >= 0
     shuffled = [rng.permutation(scene.positions) for _ in range(RETRY_REPAIR + 2)]
     tried = []

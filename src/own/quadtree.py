@@ -100,13 +100,14 @@ quadtree_build = tree_builder(quadtree_keys, quadtree_nodes)
 
 
 class Quadtree(StaticsApart, SmallScenes, MortonTree):
-    """Loose quadtree over the centres, rebuilt every frame from last frame's order.
+    """Loose quadtree over the centres, built from last frame's order once an object has moved past
+    its skin (own/tree.py).
 
     A node splits while it holds more than `capacity` objects and they do not all share one cell
     of depth `max_depth` (at most MAX_DEPTH), the deepest level. Large objects sit near the root,
     in their own leaf, and are tested against what their bounds meet. `coherent` takes the
-    objects in last frame's sorted order and repairs it (False sorts from the input order every
-    frame, to measure what coherence saves).
+    objects in last frame's sorted order and repairs it, and keeps the tree under its skin (False
+    sorts from the input order and builds every frame, to measure what coherence saves).
     """
 
     name = "own.quadtree"
@@ -152,7 +153,8 @@ class Quadtree(StaticsApart, SmallScenes, MortonTree):
             cell = np.array([_deinterleave(int(c >> np.uint64(2 * (self._depth - d)))) for c, d in zip(codes, level)],
                             dtype=np.float64).reshape(-1, 2)
             lo_x, lo_y = x0 + (cell[:, 0] - 0.5) * side, y0 + (cell[:, 1] - 0.5) * side
-            slack = 1e-9 * size
+            # A kept tree's boxes have moved up to skin / 2 since the build that placed them.
+            slack = 1e-9 * size + (0.5 * self._skin if self._anchor is not None else 0.0)
             assert ((box[0] >= lo_x - slack) & (box[1] <= lo_x + 2 * side + slack) & (box[2] >= lo_y - slack)
                     & (box[3] <= lo_y + 2 * side + slack)).all(), "a box leaves its loose cell"
 

@@ -10,7 +10,8 @@ requires; `every=k` rebuilds every k frames whatever the motion, as molecular dy
 trades accuracy for speed, measured by the trade-off study. `precision="float32"` rounds the
 coordinates and radii to float32 first, as a code that stores them so would. `fat=True` reports
 the list itself, the pairs whose fat boxes overlap, as Box2D's broad phase does: no test per
-frame, more candidates for the narrow phase, still every overlap under the rule.
+frame, more candidates for the narrow phase, still every overlap under the rule. The default skin
+adapts to the motion and the density (own/skin.py).
 """
 
 from __future__ import annotations
@@ -24,29 +25,10 @@ from scenes.scene import shown
 
 from .common import PairCollector, emit
 from .grid import UniformGrid
+from .skin import SkinSchedule, largest_step
 from .statics import StaticsApart
 
 PRECISIONS = ("float64", "float32")
-# The default skin adapts to the motion (an explicit `skin` stays as given), after each list from
-# how long it lived and how many pairs its skin added to every frame's filter:
-# - SHORT_IN_A_ROW lists in a row that lived one frame drop it to zero: no frame's motion fits it,
-#   so the list is never reused and only fattens the rebuild (halving it instead spent the first
-#   five or so frames of the tumbler on such lists; a single one is often one bounce, on a pile
-#   settling). At zero skin every frame is a rebuild, so the skin is tried again after PROBE_AFTER
-#   of them, twice as many after each try that failed (each try rebuilds the grid for the fat radii);
-# - a list whose skin added a share `excess` to the pairs that overlapped, and that lived `lived`
-#   frames, halves it where excess x lived >= SHRINK_GAIN (down to MIN_SHARE of the default):
-#   halving saves about excess / 2 of the overlapping pairs' filter every frame, for a rebuild
-#   every lived / 2 frames instead of every lived. Where objects are dense the filter costs more
-#   than the rebuilds a wide skin saves. A halved list that then lived one frame takes the skin
-#   back, and halving stops there;
-# - a list that lived LONG_LIVED frames grows it by half, up to LARGEST_SKIN_DIAMETERS.
-# Measured over 60 frames at n = 8192 (mean frame; fixed skins of 0.05 / 0.1 / 0.25 diameters, the
-# list's pairs over the overlapping ones at 0.25): the essay's motion at r = 25 took 0.41 / 0.47 /
-# 0.82 ms (1.54 times), gauss_x 0.29 / 0.26 / 0.40 (1.55), r = 10 0.15 / 0.14 / 0.17 (1.60),
-# r = 3 0.13 / 0.090 / 0.077 (1.68, lists of 3 frames), the pile 0.23 / 0.15 / 0.12 (1.22).
-SHRINK_BELOW, SHORT_IN_A_ROW, LONG_LIVED, PROBE_AFTER = 2, 2, 8, 16
-SHRINK_GAIN, MIN_SHARE = 1.25, 0.125
 SKIN_FACTORS = (0.05, 0.1, 0.25, 0.5, 1.0, 2.0)  # the skin, in mean diameters, for a sweep
 # The default skin, in mean diameters, where it starts, and the most it grows to.
 DEFAULT_SKIN_DIAMETERS, LARGEST_SKIN_DIAMETERS = 0.125, 0.25
@@ -67,15 +49,6 @@ def filter_pairs(candidates, positions, radii, buf):
             emit(buf, count, i, j)
             count += 1
     return (count,)
-
-
-@nb.njit(cache=True)
-def largest_step(positions, built):
-    """The largest displacement of any object along either axis since the list was built."""
-    step = 0.0
-    for i in range(positions.shape[0]):
-        step = max(step, abs(positions[i, 0] - built[i, 0]), abs(positions[i, 1] - built[i, 1]))
-    return step
 
 
 class VerletList(StaticsApart, BroadPhase):
@@ -116,11 +89,7 @@ class VerletList(StaticsApart, BroadPhase):
         default = DEFAULT_SKIN_DIAMETERS * 2.0 * float(positive.mean()) if len(positive) else 1.0
         self._skin = float(self.params["skin"]) if self.params["skin"] is not None else default
         self._default_skin, self._adapts = self._skin, self.params["skin"] is None and self.params["every"] is None
-        self._bare_rebuilds = 0  # rebuilds in a row at zero skin
-        self._probe_after, self._probing = PROBE_AFTER, False  # when a skin is tried again; being tried
-        self._short = 0  # lists in a row that lived one frame
-        # The skin the last list was halved from (0: it was not), and the skin no halving goes below.
-        self._halved_from, self._floor = 0.0, MIN_SHARE * self._default_skin
+        self._schedule = SkinSchedule(self._skin, LARGEST_SKIN_DIAMETERS / DEFAULT_SKIN_DIAMETERS * self._skin)
         self._overlapping = None  # the pairs that overlapped in the last frame asked for them
         if not isinstance(getattr(self, "_grid", None), UniformGrid):
             self._grid = UniformGrid()  # kept across resets, with its pair buffers (rain resets every frame)
@@ -148,37 +117,13 @@ class VerletList(StaticsApart, BroadPhase):
         every = self.params["every"]
         due = (self._since >= every) if every is not None else largest_step(positions, self._anchor) > 0.5 * self._skin
         if due:
-            if self._adapts:
-                self._adapt_skin(self._since)
+            if self._adapts:  # the share of listed pairs beyond those that overlapped in the last frame
+                excess = 0.0 if self._overlapping is None else len(self._list) / max(self._overlapping, 1) - 1.0
+                self._skin = self._schedule.next(self._since, excess)
             self._build(positions)
             self._stats["rebuilds"] += 1
             self._stats["skin"] = self._skin
         self._positions = positions
-
-    def _adapt_skin(self, lived: int) -> None:
-        """The skin for the next list, from how many frames the last one lived and how many pairs
-        it listed for each that overlapped in its last frame (see SHRINK_BELOW)."""
-        excess = 0.0 if self._overlapping is None else len(self._list) / max(self._overlapping, 1) - 1.0
-        self._short = self._short + 1 if lived < SHRINK_BELOW else 0
-        halved_from, self._halved_from = self._halved_from, 0.0
-        if self._skin == 0.0:
-            self._bare_rebuilds += 1
-            if self._bare_rebuilds >= self._probe_after:
-                self._skin, self._bare_rebuilds, self._probing = self._default_skin, 0, True
-        elif self._short and halved_from:  # halved too far: back, and no lower again
-            self._skin = self._floor = halved_from
-        elif self._short >= SHORT_IN_A_ROW:
-            if self._probing:  # a try after zero skin failed: the next waits twice as long
-                self._probe_after *= 2
-            self._skin, self._probing = 0.0, False
-        elif self._short:
-            pass  # one short list: wait for another
-        elif excess * lived >= SHRINK_GAIN and 0.5 * self._skin >= self._floor:
-            self._halved_from, self._skin = self._skin, 0.5 * self._skin
-        elif lived >= LONG_LIVED:
-            self._skin = min(1.5 * self._skin, LARGEST_SKIN_DIAMETERS / DEFAULT_SKIN_DIAMETERS * self._default_skin)
-        if not self._short:  # a list that lived: a skin is worth trying soon again
-            self._probe_after, self._probing = PROBE_AFTER, False
 
     def _pairs(self):
         self._stats["listed"] = len(self._list)
