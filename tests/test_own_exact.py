@@ -522,8 +522,8 @@ def test_verlet_list_is_exact_under_its_rebuild_rule_across_stepped_frames(scene
 @given(scene=any_scene, steps=st.lists(st.sampled_from([0.0, 0.01, 0.3, 3.0, 40.0]), min_size=1, max_size=10),
        seed=st.integers(0, 2**16))
 def test_trees_are_exact_while_kept_under_their_skin_across_stepped_frames(name, scene, steps, seed):
-    """Steps within the trees' skin (the tree kept, its bounds refitted, its listed leaf pairs
-    tested) and past it (built again, the skin adapting): every frame's pairs are the box overlaps."""
+    """Steps within the trees' skin (the tree kept, the pairs of its grown boxes tested) and past it
+    (built again, the skin adapting): every frame's pairs are the box overlaps."""
     positions, radii = scene
     positions, radii = np.asarray(positions, dtype=float).reshape(-1, 2), np.asarray(radii, dtype=float)
     rng = np.random.default_rng(seed)
@@ -548,6 +548,25 @@ def test_trees_keep_their_structure_while_nothing_moves_past_the_skin():
         np.testing.assert_array_equal(np.sort(keys(tree.pairs(), 2000)), keys(traj.box_pairs[f], 2000))
     tree.update(traj.positions[0] + 3 * tree._skin)  # past the skin: built again
     assert tree.stats()["reused"] == 0 and tree.stats()["builds"] == 2
+
+
+@pytest.mark.parametrize("name", ["own.verlet", "own.quadtree", "own.bvh"])
+def test_a_skin_drops_to_zero_where_objects_appear_or_go_every_frame(name):
+    """Objects that appear or go build the structure anew (it cannot be kept for other objects):
+    where that happens every frame, nothing built with a skin lives, and the skin goes to zero."""
+    scene = generate("uniform", 800, seed=6)
+    rng = np.random.default_rng(6)
+    backend = engines.create(name)
+    backend.small_scene_n = 0
+    backend.reset(scene.positions, scene.radii, alive=rng.random(800) < 0.9)
+    assert backend._skin > 0
+    for _ in range(3):
+        alive = rng.random(800) < 0.9
+        backend.update(scene.positions, alive)
+        held = np.flatnonzero(alive)
+        expected = held[brute_pairs(scene.positions[held], scene.radii[held])]
+        assert np.array_equal(np.sort(keys(backend.pairs(), 800)), np.sort(keys(np.sort(expected, axis=1), 800)))
+    assert backend._skin == 0.0
 
 
 def test_verlet_list_rebuilt_every_k_frames_misses_pairs_when_objects_outrun_the_skin():

@@ -153,8 +153,7 @@ class Quadtree(StaticsApart, SmallScenes, MortonTree):
             cell = np.array([_deinterleave(int(c >> np.uint64(2 * (self._depth - d)))) for c, d in zip(codes, level)],
                             dtype=np.float64).reshape(-1, 2)
             lo_x, lo_y = x0 + (cell[:, 0] - 0.5) * side, y0 + (cell[:, 1] - 0.5) * side
-            # A kept tree's boxes have moved up to skin / 2 since the build that placed them.
-            slack = 1e-9 * size + (0.5 * self._skin if self._anchor is not None else 0.0)
+            slack = 1e-9 * size
             assert ((box[0] >= lo_x - slack) & (box[1] <= lo_x + 2 * side + slack) & (box[2] >= lo_y - slack)
                     & (box[3] <= lo_y + 2 * side + slack)).all(), "a box leaves its loose cell"
 

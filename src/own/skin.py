@@ -4,13 +4,16 @@ list, the trees' leaf pairs) let each object move before they are built again.
 A structure built with a skin holds every pair whose boxes, each enlarged by half the skin, overlap;
 it is reused, exactly, while no object has moved more than skin / 2 since it was built. A wider skin
 lives longer but holds more pairs to test every frame; one that no frame's motion fits is never
-reused and only fattens the build. `largest_step` is the rule; `SkinSchedule` picks the skin for
-the next build from how long the last one lived and how many pairs its skin added.
+reused and only fattens the build. `largest_step` is the rule, `filter_pairs` tests a kept list
+against the boxes of this frame, and `SkinSchedule` picks the skin for the next build from how long
+the last one lived and how many pairs its skin added.
 """
 
 from __future__ import annotations
 
 import numba as nb
+
+from .common import emit
 
 # The rule, after each build (`lived` frames, its skin adding a share `excess` to the pairs that
 # overlapped):
@@ -42,6 +45,19 @@ def largest_step(positions, built):
     for i in range(positions.shape[0]):
         step = max(step, abs(positions[i, 0] - built[i, 0]), abs(positions[i, 1] - built[i, 1]))
     return step
+
+
+@nb.njit(cache=True)
+def filter_pairs(candidates, positions, radii, buf):
+    """The candidates whose boxes overlap now (closed intervals), in the list's order."""
+    count = 0
+    for k in range(candidates.shape[0]):
+        i, j = candidates[k, 0], candidates[k, 1]
+        reach = radii[i] + radii[j]
+        if abs(positions[i, 0] - positions[j, 0]) <= reach and abs(positions[i, 1] - positions[j, 1]) <= reach:
+            emit(buf, count, i, j)
+            count += 1
+    return (count,)
 
 
 class SkinSchedule:

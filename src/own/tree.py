@@ -9,12 +9,12 @@ whose slice is its objects. Every object is in exactly one leaf. Node bounds are
 float64 union of the boxes below them, so pruning on them never loses a pair, and the pair search
 traverses the tree against itself.
 
-A tree built with a skin (own/skin.py) is kept while no object has moved skin / 2 since: each
-frame only the boxes are taken again, in the kept order, and the bounds refitted to them, and the
-pairs are searched in the leaves and in the pairs of leaves whose bounds, grown by the skin, met
-at the build (listed then, as Bullet's and Box2D's trees keep fat boxes). Two leaves whose bounds
-meet now met so grown then, so nothing is lost. Where everything moves (the skin drops to zero) the
-tree is built and traversed every frame.
+A tree built with a skin (own/skin.py) is built over the objects' boxes grown by half the skin,
+and the pairs it finds are kept, as Box2D's and Bullet's trees keep their fat boxes and the pairs
+those overlap: while no object has moved skin / 2 since, a pair that overlaps now is among them,
+and each frame only the kept pairs are tested against the boxes (filter_pairs); past it, the tree
+is sorted and built again. The skin adapts to the motion: where everything moves it drops to zero,
+and the tree is built and traversed for the exact boxes every frame.
 """
 
 from __future__ import annotations
@@ -28,12 +28,12 @@ from engines.base import BroadPhase
 from .coherent import RepairSchedule, lattice_frame, resort
 from .common import PairCollector, gather, meet_mask, scan_mask
 from .morton import bit_length
-from .skin import SkinSchedule, largest_step
+from .skin import SkinSchedule, filter_pairs, largest_step
 
 START, END, CHILD = range(3)
 NO_CHILD = -1
-# The skin a tree starts with, and the most it grows to, in mean diameters (own/skin.py). A wider
-# skin lists more pairs of leaves, each a bounds test a frame where they no longer meet.
+# The skin a tree starts with, and the most it grows to, in mean diameters (own/skin.py): wider
+# than the Verlet list's, since a tree costs more to build than the grid's pair search.
 TREE_SKIN_DIAMETERS, LARGEST_TREE_SKIN_DIAMETERS = 0.25, 0.5
 
 
@@ -130,10 +130,9 @@ def tree_bounds(nodes, box):
 
 
 @nb.njit(cache=True, inline="always")
-def _meet(bounds, u, v, slack=0.0):
-    """Whether the bounds of nodes u and v meet, each grown by slack / 2 on every side."""
-    return (bounds[u, 0] <= bounds[v, 2] + slack) & (bounds[u, 2] + slack >= bounds[v, 0]) & \
-        (bounds[u, 1] <= bounds[v, 3] + slack) & (bounds[u, 3] + slack >= bounds[v, 1])
+def _meet(bounds, u, v):
+    return (bounds[u, 0] <= bounds[v, 2]) & (bounds[u, 2] >= bounds[v, 0]) & \
+        (bounds[u, 1] <= bounds[v, 3]) & (bounds[u, 3] >= bounds[v, 1])
 
 
 @nb.njit(cache=True, inline="always")
@@ -209,71 +208,6 @@ def tree_pairs(order, box, nodes, bounds, buf):
     return count, visited
 
 
-@nb.njit(cache=True)
-def leaf_pairs(nodes, bounds, slack, out):
-    """The pairs of distinct leaves whose bounds, each grown by slack / 2, meet, each once, into
-    `out` (rows of node ids) in the order tree_pairs visits them; returns their count (rows beyond
-    `out` are counted, not written)."""
-    count = 0
-    if nodes.shape[0] == 0:
-        return (count,)
-    stack = np.empty((256, 2), dtype=np.int64)
-    stack[0, 0], stack[0, 1] = 0, 0
-    top = 1
-    while top > 0:
-        top -= 1
-        u, v = stack[top, 0], stack[top, 1]
-        if top + 3 > stack.shape[0]:
-            stack = np.concatenate((stack, np.empty_like(stack)))
-        if u == v:
-            left = nodes[u, CHILD]
-            if left == NO_CHILD:
-                continue
-            stack[top, 0], stack[top, 1] = left, left
-            stack[top + 1, 0], stack[top + 1, 1] = left + 1, left + 1
-            top += 2
-            if _meet(bounds, left, left + 1, slack):
-                stack[top, 0], stack[top, 1] = left, left + 1
-                top += 1
-            continue
-        u_leaf, v_leaf = nodes[u, CHILD] == NO_CHILD, nodes[v, CHILD] == NO_CHILD
-        if u_leaf and v_leaf:
-            if count < out.shape[0]:
-                out[count, 0], out[count, 1] = u, v
-            count += 1
-            continue
-        if u_leaf or (not v_leaf and nodes[v, END] - nodes[v, START] > nodes[u, END] - nodes[u, START]):
-            u, v = v, u
-        left = nodes[u, CHILD]
-        for child in (left, left + 1):
-            if _meet(bounds, child, v, slack):
-                stack[top, 0], stack[top, 1] = child, v
-                top += 1
-    return (count,)
-
-
-@nb.njit(cache=True)
-def listed_pairs(order, box, nodes, bounds, leaves, cross, buf):
-    """Box-overlap pairs into buf, each once, from the leaves' own objects and the listed pairs
-    of leaves (leaf_pairs); returns (pairs found,)."""
-    count = 0
-    for k in leaves:
-        count = _leaf_self(order, box, nodes[k, START], nodes[k, END], buf, count)
-    for r in range(cross.shape[0]):
-        count = _leaf_cross(order, box, bounds, nodes, cross[r, 0], cross[r, 1], buf, count)
-    return (count,)
-
-
-@nb.njit(cache=True)
-def refit(positions, radii, order, box, nodes):
-    """The boxes again in the kept order (rows lx, hx, ly, hy), and the bounds refitted to them."""
-    for a in range(order.shape[0]):
-        i = order[a]
-        x, y, r = positions[i, 0], positions[i, 1], radii[i]
-        box[0, a], box[1, a], box[2, a], box[3, a] = x - r, x + r, y - r, y + r
-    return tree_bounds(nodes, box)
-
-
 class MortonTree(BroadPhase):
     """A tree over Morton-sorted objects, built anew from last frame's order when an object has
     moved past its skin (every frame where the skin dropped to zero). A subclass sets `build` (made
@@ -285,6 +219,7 @@ class MortonTree(BroadPhase):
     def __init__(self, **params):
         super().__init__(**params)
         self._collect = PairCollector()
+        self._keep = PairCollector()  # the kept pairs, apart from the buffers a frame's pairs are handed back in
 
     def _reset(self, positions, radii):
         n = self.n
@@ -295,67 +230,69 @@ class MortonTree(BroadPhase):
         self._box = np.empty((4, n))  # by column: scans compare four contiguous runs
         self._lattice = np.zeros(3)  # (x0, y0, size) of the lattice square; none yet
         self._schedule = RepairSchedule()
-        positive = radii[radii > 0]
-        diameter = 2.0 * float(positive.mean()) if len(positive) else 0.0
-        self._skins = SkinSchedule(TREE_SKIN_DIAMETERS * diameter, LARGEST_TREE_SKIN_DIAMETERS * diameter)
-        self._skin = self._skins.skin if self.params["coherent"] else 0.0
-        self._anchor = None  # where the objects were at the build, while it is kept (a skin)
-        self._cross = np.empty((1024, 2), dtype=np.int64)
+        if self._built and self.params["coherent"]:
+            # Built anew in a run, for the objects that appeared or went: the last tree lived until
+            # now, and the skin goes on adapting (where objects come and go every frame, a grown
+            # tree is never kept, and the skin drops to zero).
+            self._skin = self._skins.next(self._since + 1)
+        else:
+            positive = radii[radii > 0]
+            diameter = 2.0 * float(positive.mean()) if len(positive) else 0.0
+            self._skins = SkinSchedule(TREE_SKIN_DIAMETERS * diameter, LARGEST_TREE_SKIN_DIAMETERS * diameter)
+            self._skin = self._skins.skin if self.params["coherent"] else 0.0
+        self._kept = None  # the pairs of the boxes grown by half the skin, found at the build, while kept
+        self._overlapping = None  # the pairs that overlapped in the last frame asked for them
         self._builds = 0
         self._build(positions)
 
     def _update(self, positions):
         self._positions = positions
         self._since += 1
-        if self._anchor is not None and largest_step(positions, self._anchor) <= 0.5 * self._skin:
-            self._bounds = refit(positions, self.radii, self._order, self._box, self._nodes)
+        if self._skin > 0.0 and largest_step(positions, self._anchor) <= 0.5 * self._skin:
             self._stats = {**self._stats, "reused": 1}
             return
         if self.params["coherent"]:
-            self._skin = self._skins.next(self._since)
+            listed = len(self._kept) if self._kept is not None else 0
+            excess = listed / self._overlapping - 1.0 if listed and self._overlapping else 0.0
+            self._skin = self._skins.next(self._since, excess)
         self._build(positions)
 
     def _build(self, positions):
-        """Sort and build the tree for this frame; with a skin, list the pairs of leaves to test
-        until an object has moved skin / 2."""
+        """Sort and build the tree for this frame, over the boxes grown by half the skin."""
         self._positions = positions
         if not self.params["coherent"]:
             self._order[:1] = -1  # no last order (as before the first frame): sort from the input order
             self._lattice[:] = 0.0  # and a lattice fitted to this frame alone
         repair = self._schedule.due(self._order[:1].min(initial=0) >= 0)
+        radii = self.radii + 0.5 * self._skin if self._skin > 0.0 else self.radii
         self._nodes, self._bounds, swaps = self.build(
-            positions, self.radii, self._order, self._spare_order, self._work, self._box, self._lattice, repair,
+            positions, radii, self._order, self._spare_order, self._work, self._box, self._lattice, repair,
             self._depth, self._capacity)
         self._schedule.record(repair, swaps)
         self._order, self._spare_order = self._spare_order, self._order
-        self._since, self._builds = 0, self._builds + 1
-        self._anchor = None
-        if self._skin > 0.0:
-            self._anchor = positions.copy()
-            self._leaves = np.flatnonzero(self._nodes[:, CHILD] == NO_CHILD)
-            (count,) = leaf_pairs(self._nodes, self._bounds, self._skin, self._cross)
-            if count > len(self._cross):
-                self._cross = np.empty((count + count // 4, 2), dtype=np.int64)
-                leaf_pairs(self._nodes, self._bounds, self._skin, self._cross)
-            self._listed = self._cross[:count]
+        self._since, self._builds, self._kept = 0, self._builds + 1, None
+        self._anchor = positions.copy() if self._skin > 0.0 else None  # where the boxes were grown from
         self._stats = {"nodes": len(self._nodes), "swaps": swaps, "builds": self._builds, "skin": self._skin,
                        "reused": 0}
 
     def _pairs(self):
-        if self._anchor is not None:
-            out, _ = self._collect(listed_pairs, self._order, self._box, self._nodes, self._bounds, self._leaves,
-                                   self._listed)
-            self._stats["leaf_pairs"] = len(self._listed)
+        if self._skin == 0.0:
+            out, (visited,) = self._collect(tree_pairs, self._order, self._box, self._nodes, self._bounds)
+            self._stats["visited"] = visited
             return out
-        out, (visited,) = self._collect(tree_pairs, self._order, self._box, self._nodes, self._bounds)
-        self._stats["visited"] = visited
+        if self._kept is None:  # the frame of the build: the grown boxes' pairs, kept
+            self._kept, (self._stats["visited"],) = self._keep(tree_pairs, self._order, self._box, self._nodes,
+                                                               self._bounds)
+        out, _ = self._collect(filter_pairs, self._kept, self._positions, self.radii)
+        self._overlapping = len(out)
+        self._stats["kept"] = len(self._kept)
         return out
 
     def _validate_tree(self, capacity_ok):
         """The checks every such tree passes; `capacity_ok(s, e)`: whether a leaf of that slice
         may hold what it holds."""
         n, nodes, bounds, box = self.n, self._nodes, self._bounds, self._box
-        if self._anchor is not None:
+        if self._skin > 0.0:
             assert largest_step(self._positions, self._anchor) <= 0.5 * self._skin, "an object outran the skin"
         assert np.array_equal(np.sort(self._order), np.arange(n)), "sort order is not a permutation"
         keys = self._work[2]

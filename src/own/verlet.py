@@ -16,16 +16,15 @@ adapts to the motion and the density (own/skin.py).
 
 from __future__ import annotations
 
-import numba as nb
 import numpy as np
 
 from engines.base import BroadPhase
 from engines.knobs import Knob, fixed, mean_diameter, sizes
 from scenes.scene import shown
 
-from .common import PairCollector, emit
+from .common import PairCollector
 from .grid import UniformGrid
-from .skin import SkinSchedule, largest_step
+from .skin import SkinSchedule, filter_pairs, largest_step
 from .statics import StaticsApart
 
 PRECISIONS = ("float64", "float32")
@@ -36,19 +35,6 @@ DEFAULT_SKIN_DIAMETERS, LARGEST_SKIN_DIAMETERS = 0.125, 0.25
 # sweep's larger skins (a diameter lives about 30 frames of the essay's motion at r = 10) must pay
 # for a rebuild inside it, as the default's shorter-lived lists do.
 TRIAL_FRAMES = 40
-
-
-@nb.njit(cache=True)
-def filter_pairs(candidates, positions, radii, buf):
-    """The candidates whose boxes overlap now (closed intervals), in the list's order."""
-    count = 0
-    for k in range(candidates.shape[0]):
-        i, j = candidates[k, 0], candidates[k, 1]
-        reach = radii[i] + radii[j]
-        if abs(positions[i, 0] - positions[j, 0]) <= reach and abs(positions[i, 1] - positions[j, 1]) <= reach:
-            emit(buf, count, i, j)
-            count += 1
-    return (count,)
 
 
 class VerletList(StaticsApart, BroadPhase):
@@ -87,9 +73,16 @@ class VerletList(StaticsApart, BroadPhase):
         self._radii = self._rounded(radii)
         positive = self._radii[self._radii > 0]
         default = DEFAULT_SKIN_DIAMETERS * 2.0 * float(positive.mean()) if len(positive) else 1.0
-        self._skin = float(self.params["skin"]) if self.params["skin"] is not None else default
-        self._default_skin, self._adapts = self._skin, self.params["skin"] is None and self.params["every"] is None
-        self._schedule = SkinSchedule(self._skin, LARGEST_SKIN_DIAMETERS / DEFAULT_SKIN_DIAMETERS * self._skin)
+        self._adapts = self.params["skin"] is None and self.params["every"] is None
+        if self._built and self._adapts:
+            # Built anew in a run, for the objects that appeared or went: the last list lived until
+            # now, and the skin goes on adapting (where objects come and go every frame, a list is
+            # never reused, and the skin drops to zero).
+            self._skin = self._schedule.next(self._since + 1)
+        else:
+            self._skin = float(self.params["skin"]) if self.params["skin"] is not None else default
+            self._default_skin = self._skin
+            self._schedule = SkinSchedule(self._skin, LARGEST_SKIN_DIAMETERS / DEFAULT_SKIN_DIAMETERS * self._skin)
         self._overlapping = None  # the pairs that overlapped in the last frame asked for them
         if not isinstance(getattr(self, "_grid", None), UniformGrid):
             self._grid = UniformGrid()  # kept across resets, with its pair buffers (rain resets every frame)
