@@ -27,8 +27,8 @@ from engines.knobs import frames_needed
 from own.bvh import LinearBvh
 from own.grid import GRID_CELL_FACTORS, MAX_CELLS_PER_OBJECT
 from own.quadtree import Quadtree
-from own.skin import SHRINK_GAIN
-from own.verlet import DEFAULT_SKIN_DIAMETERS, SKIN_FACTORS, TRIAL_FRAMES
+from own.skin import GROW_MARGIN, SHRINK_GAIN
+from own.verlet import DEFAULT_SKIN_DIAMETERS, LARGEST_SKIN_DIAMETERS, SKIN_FACTORS, TRIAL_FRAMES
 from own.sap import SPARSE_PAIRS_PER_OBJECT
 from scenes import FAMILIES as RECORDED_FAMILIES
 from scenes import Scene, generate
@@ -267,9 +267,11 @@ def write_tuning_md(table: pd.DataFrame, curves: pd.DataFrame, path: Path, args)
         f"  vary most and the sparse sweep while last frame found at most {SPARSE_PAIRS_PER_OBJECT} pairs per object",
         "  (`SPARSE_PAIRS_PER_OBJECT`) and float32 tells the objects apart.",
         f"- `own.bvh`: at most {LinearBvh.defaults['leaf_size']} objects per leaf.",
-        f"- `own.verlet`: skin {DEFAULT_SKIN_DIAMETERS} mean diameters, dropped to zero after a list that lived one frame, halved",
-        f"  where the share of pairs its skin added times the frames it lived reached {SHRINK_GAIN:g}, grown back after",
-        "  one that lived long (only the skin is swept: its other knobs give up exactness).",
+        f"- `own.verlet` (and the trees' kept pairs): skin {DEFAULT_SKIN_DIAMETERS} mean diameters to start, dropped to zero after",
+        f"  two lists in a row that lived one frame, halved where the pairs its skin added per object times the frames a list",
+        f"  lived reached {SHRINK_GAIN:g}, doubled (up to {LARGEST_SKIN_DIAMETERS:g} diameters) where that stayed under "
+        f"{SHRINK_GAIN / GROW_MARGIN:.3g} (`own/skin.py`;",
+        "  only the skin is swept: the list's other knobs give up exactness).",
         "",
         "![time against each knob, relative to the best on each scene](figures/tuning_rules.png)",
         "",

@@ -614,29 +614,33 @@ def test_grid_cells_are_sized_to_the_objects_under_the_bound_not_to_a_huge_one()
 
 def test_verlet_default_skin_follows_the_motion_and_the_density():
     """Fast motion: two lists in a row that lived one frame drop the skin to zero; it is tried
-    again after PROBE_AFTER rebuilds, and after a failed try twice as many. The essay's motion at
-    its density: lists live, but their skin adds pairs to every frame's filter, so it is halved.
-    A still scene keeps the default. Every frame exact throughout."""
+    again after PROBE_AFTER rebuilds, and after a failed try twice as many. The essay's motion,
+    dense (r = 25): lists live, but the pairs their skin adds cost more than the rebuilds it
+    saves, so it is halved. Sparse (r = 3): the other way, it grows. A still scene keeps the
+    default. Every frame exact throughout."""
     from own.skin import MIN_SHARE, PROBE_AFTER
 
     fast = simulate(generate("uniform", 600, seed=3, speed=3000.0), frames=2 + PROBE_AFTER + 4)
-    calm = simulate(generate("uniform", 600, seed=3), frames=30)
+    dense = simulate(generate("uniform", 2000, seed=3, radius=25.0), frames=40)
+    sparse = simulate(generate("uniform", 2000, seed=3, radius=3.0), frames=40)
     still = generate("uniform", 600, seed=3)
     skins = {}
-    for label, frames, radii in (("fast", fast.positions, fast.scene.radii), ("calm", calm.positions, calm.scene.radii),
-                                 ("still", [still.positions] * 12, still.radii)):
+    for label, frames, radii in (("fast", fast.positions, fast.scene.radii), ("dense", dense.positions, dense.scene.radii),
+                                 ("sparse", sparse.positions, sparse.scene.radii), ("still", [still.positions] * 12, still.radii)):
         verlet = engines.create("own.verlet")
         verlet.reset(frames[0], radii)
         skins[label] = []
         for positions in frames[1:]:
             verlet.update(positions)
             verlet.validate()
-            np.testing.assert_array_equal(np.sort(keys(verlet.pairs(), 600)), keys(brute_pairs(positions, radii), 600))
+            n = len(positions)
+            np.testing.assert_array_equal(np.sort(keys(verlet.pairs(), n)), keys(brute_pairs(positions, radii), n))
             skins[label].append(verlet._skin / verlet._default_skin)
         if label == "fast":
             assert verlet._schedule.probe_after == 2 * PROBE_AFTER  # the one try at a skin failed
     assert skins["fast"][:2] == [1.0, 0.0] and skins["fast"].count(1.0) == 2, skins["fast"]  # the start, one try
-    assert MIN_SHARE <= skins["calm"][-1] < 1.0, skins["calm"]
+    assert MIN_SHARE <= skins["dense"][-1] < 1.0, skins["dense"]
+    assert skins["sparse"][-1] > 1.0, skins["sparse"]
     assert set(skins["still"]) == {1.0}
     fixed = engines.create("own.verlet", skin=10.0)
     fixed.reset(fast.positions[0], fast.scene.radii)

@@ -1,5 +1,5 @@
-"""A skin that adapts to the motion: how far our structures that are reused over frames (the Verlet
-list, the trees' leaf pairs) let each object move before they are built again.
+"""A skin that adapts to the motion: how far our structures that are kept over frames (the Verlet
+list, the trees and the pairs they found) let each object move before they are built again.
 
 A structure built with a skin holds every pair whose boxes, each enlarged by half the skin, overlap;
 it is reused, exactly, while no object has moved more than skin / 2 since it was built. A wider skin
@@ -15,27 +15,30 @@ import numba as nb
 
 from .common import emit
 
-# The rule, after each build (`lived` frames, its skin adding a share `excess` to the pairs that
-# overlapped):
+# The rule, after each build (`lived` frames, its skin adding `extra` pairs per object to those
+# that overlapped):
 # - SHORT_IN_A_ROW builds in a row that lived one frame drop the skin to zero: no frame's motion
 #   fits it (halving it instead spent the first five or so frames of the tumbler on such lists; a
 #   single one is often one bounce, on a pile settling). At zero skin every frame is a build, so a
 #   skin is tried again after PROBE_AFTER of them, twice as many after each try that failed (each
 #   try builds for the fat radii anew);
-# - where excess x lived >= SHRINK_GAIN the skin is halved (down to MIN_SHARE of the start):
-#   halving saves about excess / 2 of the overlapping pairs' tests every frame, for a build every
-#   lived / 2 frames instead of every lived; where objects are dense the tests cost more than the
-#   builds a wide skin saves. A halved skin whose build then lived one frame is taken back, and
-#   halving stops there;
-# - a build that lived LONG_LIVED frames grows the skin by half, up to `largest`.
+# - where extra x lived >= SHRINK_GAIN the skin is halved (down to MIN_SHARE of the start):
+#   halving saves about half the extra pairs' tests every frame, for a build every lived / 2
+#   frames instead of every lived, and a build costs about what testing SHRINK_GAIN / 2 pairs per
+#   object does; where objects are dense the tests cost more than the builds a wide skin saves. A
+#   halved skin whose build then lived one frame is taken back, and halving stops there;
+# - where extra x lived x GROW_MARGIN < SHRINK_GAIN the skin is doubled, up to `largest`: where
+#   objects are sparse or slow its pairs cost little and a wider one saves builds (doubling it
+#   adds about GROW_MARGIN times the product, so it is not halved again at once).
 # Measured on the Verlet list over 60 frames at n = 8192 (mean frame; fixed skins of 0.05 / 0.1 /
-# 0.25 mean diameters, the list's pairs over the overlapping ones at 0.25): the essay's motion at
-# r = 25 took 0.41 / 0.47 / 0.82 ms (1.54 times), gauss_x 0.29 / 0.26 / 0.40 (1.55), r = 10 0.15 /
-# 0.14 / 0.17 (1.60), r = 3 0.13 / 0.090 / 0.077 (1.68, lists of 3 frames), the pile 0.23 / 0.15 /
-# 0.12 (1.22). With this rule, starting at 0.125 diameters, each was within 1.25x of the best of
-# the three, and the tumbler (everything moves a cell in a few frames) 1.1x faster than any.
-SHRINK_BELOW, SHORT_IN_A_ROW, LONG_LIVED, PROBE_AFTER = 2, 2, 8, 16
-SHRINK_GAIN, MIN_SHARE = 1.25, 0.125
+# 0.25 mean diameters; extra pairs per object x frames lived at 0.25): the essay's motion at r = 25
+# took 0.41 / 0.47 / 0.82 ms (55), gauss_x 0.29 / 0.26 / 0.40 (12), r = 10 0.15 / 0.14 / 0.17 (7),
+# r = 3 0.13 / 0.090 / 0.077 (0.2), the pile 0.23 / 0.15 / 0.12 (3). A rule on the share of pairs
+# the skin adds instead halved the skin on sparse scenes, where a build costs more than the few
+# pairs it saves (up to 2.6x slower at n = 1024 in the tuning study); there a skin of a diameter
+# was fastest (r = 3: 0.059 ms against 0.075 at a quarter diameter, n = 8192).
+SHRINK_BELOW, SHORT_IN_A_ROW, PROBE_AFTER = 2, 2, 16
+SHRINK_GAIN, GROW_MARGIN, MIN_SHARE = 10.0, 6.0, 0.125
 
 
 @nb.njit(cache=True)
@@ -71,9 +74,9 @@ class SkinSchedule:
         self._short = 0  # builds in a row that lived one frame
         self._halved_from = 0.0  # the skin the last build was halved from (0: it was not)
 
-    def next(self, lived: int, excess: float = 0.0) -> float:
-        """The skin for the next build, after one that lived `lived` frames with a share `excess`
-        of pairs beyond those that overlapped."""
+    def next(self, lived: int, extra: float = 0.0) -> float:
+        """The skin for the next build, after one that lived `lived` frames with `extra` pairs per
+        object beyond those that overlapped."""
         self._short = self._short + 1 if lived < SHRINK_BELOW else 0
         halved_from, self._halved_from = self._halved_from, 0.0
         if self.skin == 0.0:
@@ -88,10 +91,10 @@ class SkinSchedule:
             self.skin, self._probing = 0.0, False
         elif self._short:
             pass  # one short build: wait for another
-        elif excess * lived >= SHRINK_GAIN and 0.5 * self.skin >= self.floor:
+        elif extra * lived >= SHRINK_GAIN and 0.5 * self.skin >= self.floor:
             self._halved_from, self.skin = self.skin, 0.5 * self.skin
-        elif lived >= LONG_LIVED:
-            self.skin = min(1.5 * self.skin, self.largest)
+        elif extra * lived * GROW_MARGIN < SHRINK_GAIN:
+            self.skin = min(2.0 * self.skin, self.largest)
         if not self._short:  # a build that lived: a skin is worth trying soon again
             self._probe_after, self._probing = PROBE_AFTER, False
         return self.skin

@@ -32,9 +32,9 @@ from .skin import SkinSchedule, filter_pairs, largest_step
 
 START, END, CHILD = range(3)
 NO_CHILD = -1
-# The skin a tree starts with, and the most it grows to, in mean diameters (own/skin.py): wider
-# than the Verlet list's, since a tree costs more to build than the grid's pair search.
-TREE_SKIN_DIAMETERS, LARGEST_TREE_SKIN_DIAMETERS = 0.25, 0.5
+# The skin a tree starts with, and the most it grows to, in mean diameters (own/skin.py), as the
+# Verlet list's.
+TREE_SKIN_DIAMETERS, LARGEST_TREE_SKIN_DIAMETERS = 0.25, 1.0
 
 
 def tree_builder(key_kernel, node_kernel):
@@ -252,9 +252,9 @@ class MortonTree(BroadPhase):
             self._stats = {**self._stats, "reused": 1}
             return
         if self.params["coherent"]:
-            listed = len(self._kept) if self._kept is not None else 0
-            excess = listed / self._overlapping - 1.0 if listed and self._overlapping else 0.0
-            self._skin = self._skins.next(self._since, excess)
+            kept = len(self._kept) if self._kept is not None and self._overlapping is not None else 0
+            extra = (kept - self._overlapping) / max(self.n, 1) if kept else 0.0
+            self._skin = self._skins.next(self._since, extra)
         self._build(positions)
 
     def _build(self, positions):

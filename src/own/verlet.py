@@ -29,8 +29,8 @@ from .statics import StaticsApart
 
 PRECISIONS = ("float64", "float32")
 SKIN_FACTORS = (0.05, 0.1, 0.25, 0.5, 1.0, 2.0)  # the skin, in mean diameters, for a sweep
-# The default skin, in mean diameters, where it starts, and the most it grows to.
-DEFAULT_SKIN_DIAMETERS, LARGEST_SKIN_DIAMETERS = 0.125, 0.25
+# The default skin, in mean diameters: where it starts, and the most it grows to.
+DEFAULT_SKIN_DIAMETERS, LARGEST_SKIN_DIAMETERS = 0.25, 1.0
 # Every trial that tunes the skin spans this many frames (engines.knobs.Knob.trial_frames): the
 # sweep's larger skins (a diameter lives about 30 frames of the essay's motion at r = 10) must pay
 # for a rebuild inside it, as the default's shorter-lived lists do.
@@ -110,9 +110,9 @@ class VerletList(StaticsApart, BroadPhase):
         every = self.params["every"]
         due = (self._since >= every) if every is not None else largest_step(positions, self._anchor) > 0.5 * self._skin
         if due:
-            if self._adapts:  # the share of listed pairs beyond those that overlapped in the last frame
-                excess = 0.0 if self._overlapping is None else len(self._list) / max(self._overlapping, 1) - 1.0
-                self._skin = self._schedule.next(self._since, excess)
+            if self._adapts:  # listed pairs per object beyond those that overlapped in the last frame
+                extra = 0.0 if self._overlapping is None else (len(self._list) - self._overlapping) / max(len(positions), 1)
+                self._skin = self._schedule.next(self._since, extra)
             self._build(positions)
             self._stats["rebuilds"] += 1
             self._stats["skin"] = self._skin
