@@ -232,7 +232,7 @@ def print_coherence(trajectories, seconds: float, table: "Table") -> None:
                        "kept_frames": kept, "repaired_frames": len(swaps), "frames": frames,
                        "moved_by_repair": moved_by_repair,
                        "changed_cell": changed_cell})
-            print(f"{n:>9} {backend:<14} {scratch_ms:>16.3f} {coherent_ms:>12.3f} {scratch_ms / coherent_ms:>16.2f}x "
+            print(f"{n:>9} {backend:<14} {scratch_ms:>16.4f} {coherent_ms:>12.4f} {scratch_ms / coherent_ms:>16.2f}x "
                   f"{f'{kept}/{frames}':>12} {f'{len(swaps)}/{frames}':>16} {moved_by_repair:>16} {changed_cell:>13}")
             sys.stdout.flush()
 
