@@ -76,8 +76,8 @@ def main(argv: list[str] | None = None) -> int:
         runnable = [b for b in chosen if b not in unavailable]
         writer = RowWriter(out.path, args.resume)
         runner = Runner(writer, out, pool=Pool.from_args(args))
-        out.meta(full=not args.quick, families=args.family_list, sizes=args.size_list, frames=args.frames,
-                 repeats=args.repeat,
+        out.meta(full=covers_every_backend(args, out.path), families=args.family_list, sizes=args.size_list,
+                 frames=args.frames, repeats=args.repeat,
                  unavailable=unavailable, commands=commands)
         jobs = []
         for family in args.family_list:
@@ -89,7 +89,17 @@ def main(argv: list[str] | None = None) -> int:
         with runner:
             runner.run_all(jobs, desc="scene families x backends")
         writer.finish()
-    return report(out.path, report_folder(args, out.path))
+    return report(out.path, report_folder(args, out.path, read_meta(out.path)))
+
+
+def covers_every_backend(args, folder: Path) -> bool:
+    """Whether the run makes the report that docs/ holds: every family and every backend (at some
+    of the sizes), or more sizes added to such a run with --resume. A run narrowed to a few
+    backends or families writes its report into --out, and leaves the one in docs/ alone."""
+    if args.quick:
+        return False
+    every = set(args.family_list) == {ESSAY_MOTION, *FAMILIES} and args.backends == "*"
+    return every or (args.resume and bool(read_meta(folder).get("full")))
 
 
 def family_tables(rows: pd.DataFrame) -> dict[tuple[str, int], pd.DataFrame]:

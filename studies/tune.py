@@ -30,6 +30,7 @@ from own.quadtree import Quadtree
 from own.skin import GROW_MARGIN, SHRINK_GAIN
 from own.verlet import DEFAULT_SKIN_DIAMETERS, LARGEST_SKIN_DIAMETERS, SKIN_FACTORS, TRIAL_FRAMES
 from own.sap import SPARSE_PAIRS_PER_OBJECT
+from own.tree import REFIT_DRIFT
 from scenes import FAMILIES as RECORDED_FAMILIES
 from scenes import Scene, generate
 
@@ -266,7 +267,8 @@ def write_tuning_md(table: pd.DataFrame, curves: pd.DataFrame, path: Path, args)
         "  overlaps (then the axis along which the boxes extend further), else the axis along which the centres",
         f"  vary most and the sparse sweep while last frame found at most {SPARSE_PAIRS_PER_OBJECT} pairs per object",
         "  (`SPARSE_PAIRS_PER_OBJECT`) and float32 tells the objects apart.",
-        f"- `own.bvh`: at most {LinearBvh.defaults['leaf_size']} objects per leaf.",
+        f"- `own.bvh`: at most {LinearBvh.defaults['leaf_size']} objects per leaf; at zero skin, refitted until the node",
+        f"  pairs its searches visited since the build exceed one search by {REFIT_DRIFT:g} of it (`REFIT_DRIFT`).",
         f"- `own.verlet` (and the trees' kept pairs): skin {DEFAULT_SKIN_DIAMETERS} mean diameters to start, dropped to zero after",
         f"  two lists in a row that lived one frame, halved where the pairs its skin added per object times the frames a list",
         f"  lived reached {SHRINK_GAIN:g}, doubled (up to {LARGEST_SKIN_DIAMETERS:g} mean "

@@ -194,6 +194,24 @@ def test_a_quick_runs_report_never_goes_to_docs(tmp_path):
         tmp_path / "r"
 
 
+def test_a_scenes_run_narrowed_to_some_backends_or_families_leaves_docs_alone(tmp_path):
+    from argparse import Namespace
+
+    from studies.scenes import ESSAY_MOTION, FAMILIES, covers_every_backend
+
+    every = [ESSAY_MOTION, *FAMILIES]
+    run = dict(quick=False, resume=False, family_list=every, backends="*")
+    assert covers_every_backend(Namespace(**run), tmp_path)
+    assert not covers_every_backend(Namespace(**{**run, "backends": "own.*"}), tmp_path)
+    assert not covers_every_backend(Namespace(**{**run, "family_list": ["pile"]}), tmp_path)
+    assert not covers_every_backend(Namespace(**{**run, "quick": True}), tmp_path)
+    # More sizes for some backends, resumed into a folder that holds a full run: still the full report.
+    (tmp_path / "meta.json").write_text('{"full": true}')
+    assert covers_every_backend(Namespace(**{**run, "backends": "own.*", "resume": True}), tmp_path)
+    (tmp_path / "meta.json").write_text('{"full": false}')
+    assert not covers_every_backend(Namespace(**{**run, "backends": "own.*", "resume": True}), tmp_path)
+
+
 def test_a_crashed_engines_temporary_files_are_removed(monkeypatch, capfd):
     from fakes import LeavesFiles, register
     from scenes import generate

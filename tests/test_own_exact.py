@@ -519,11 +519,12 @@ def test_verlet_list_is_exact_under_its_rebuild_rule_across_stepped_frames(scene
 
 @pytest.mark.parametrize("name", ["own.quadtree", "own.bvh"])
 @settings(max_examples=40)
-@given(scene=any_scene, steps=st.lists(st.sampled_from([0.0, 0.01, 0.3, 3.0, 40.0]), min_size=1, max_size=10),
+@given(scene=any_scene, steps=st.lists(st.sampled_from([0.0, 0.01, 0.3, 3.0, 40.0]), min_size=1, max_size=14),
        seed=st.integers(0, 2**16))
 def test_trees_are_exact_while_kept_under_their_skin_across_stepped_frames(name, scene, steps, seed):
     """Steps within the trees' skin (the tree kept, the pairs of its grown boxes tested) and past it
-    (built again, the skin adapting): every frame's pairs are the box overlaps."""
+    (built again, the skin adapting; once it is zero, a BVH refitted until its leaves drift apart):
+    every frame's pairs are the box overlaps."""
     positions, radii = scene
     positions, radii = np.asarray(positions, dtype=float).reshape(-1, 2), np.asarray(radii, dtype=float)
     rng = np.random.default_rng(seed)
@@ -548,6 +549,40 @@ def test_trees_keep_their_structure_while_nothing_moves_past_the_skin():
         np.testing.assert_array_equal(np.sort(keys(tree.pairs(), 2000)), keys(traj.box_pairs[f], 2000))
     tree.update(traj.positions[0] + 3 * tree._skin)  # past the skin: built again
     assert tree.stats()["reused"] == 0 and tree.stats()["builds"] == 2
+
+
+def test_bvh_refits_its_leaves_where_neighbours_move_together_and_builds_once_they_scatter():
+    """A packed disc turning fast: every object moves past any skin each frame, but its neighbours
+    move with it, so the BVH keeps its leaves and refits their bounds (the quadtree, whose leaves
+    are cells, is built every frame); shuffled, the leaves scatter and the BVH is built again."""
+    rng = np.random.default_rng(3)
+    radius, angle = np.sqrt(rng.random(1500)) * 300.0, rng.random(1500) * 2 * np.pi
+    radii = rng.uniform(4.0, 8.0, 1500)
+    frames = [np.column_stack([radius * np.cos(angle + 0.05 * f), radius * np.sin(angle + 0.05 * f)])
+              for f in range(30)]
+    for name in ("own.bvh", "own.quadtree"):
+        tree = engines.create(name)
+        tree.reset(frames[0], radii)
+        for positions in frames[1:]:
+            tree.update(positions)
+            tree.validate()
+            assert np.array_equal(np.sort(keys(tree.pairs(), 1500)), keys(brute_pairs(positions, radii), 1500))
+        assert tree._skin == 0.0
+        if name == "own.bvh":
+            assert tree.stats()["refits"] >= 20 and tree.stats()["builds"] <= 6, tree.stats()
+        else:
+            assert tree.stats()["refits"] == 0 and tree.stats()["builds"] == 30, tree.stats()
+    bvh = engines.create("own.bvh")
+    bvh.reset(frames[0], radii)
+    for positions in frames[1:4]:
+        bvh.update(positions)
+        bvh.pairs()
+    builds = bvh.stats()["builds"]
+    for _ in range(2):  # refitted over scattered leaves, found scattered, built again
+        positions = rng.permutation(frames[4])
+        bvh.update(positions)
+        assert np.array_equal(np.sort(keys(bvh.pairs(), 1500)), keys(brute_pairs(positions, radii), 1500))
+    assert bvh.stats()["builds"] == builds + 1
 
 
 @pytest.mark.parametrize("name", ["own.verlet", "own.quadtree", "own.bvh"])
@@ -661,14 +696,19 @@ def test_trees_keep_their_lattice_while_the_boxes_stay_inside_and_retry_a_failed
     # Past the tree's skin (built again) but inside the lattice's slack: same lattice, a cheap repair.
     tree.update(scene.positions + tree._skin)
     assert np.array_equal(tree._lattice, square) and tree.stats()["swaps"] >= 0
-    shuffled = [rng.permutation(scene.positions) for _ in range(RETRY_REPAIR + 2)]
     tried = []
-    for positions in shuffled:  # every frame jumps: the repair gives up, then waits
+    while len(tried) < RETRY_REPAIR + 2:  # every frame jumps: the repair gives up, then waits
+        positions = rng.permutation(scene.positions)
+        builds = tree.stats()["builds"]
         tree.update(positions)
-        tried.append(tree.stats()["swaps"])
+        if tree.stats()["builds"] > builds:  # (a BVH refits its leaves in between, and finds them scattered)
+            tried.append(tree.stats()["swaps"])
         tree.validate()
         assert set(map(tuple, tree.pairs().tolist())) == set(map(tuple, brute_pairs(positions, scene.radii).tolist()))
     assert all(s == -1 for s in tried)
     assert tree._schedule.waited == 0  # tried again after RETRY_REPAIR frames (and gave up again)
-    tree.update(scene.positions * 0.5)  # the boxes span less than half the square: fitted afresh
-    assert tree._lattice[2] < square[2]
+    builds = tree.stats()["builds"]
+    for _ in range(3):  # the boxes span less than half the square: fitted afresh at the next build
+        tree.update(scene.positions * 0.5)
+        tree.pairs()
+    assert tree.stats()["builds"] > builds and tree._lattice[2] < square[2]

@@ -1,8 +1,10 @@
 """Linear BVH (the standard GPU method, Lauterbach et al. 2009, Karras 2012): centres are
 quantised to a 2^16 x 2^16 lattice, interleaved into 32-bit Morton codes and sorted, so that
 objects close in space are close in the order; the tree is the binary radix tree of the sorted
-codes, built again once an object has moved past the tree's skin (own/tree.py). The sort starts
-from last frame's order, where the codes are almost sorted, and repairs it (own/coherent.py).
+codes, built again once an object has moved past the tree's skin (own/tree.py); where the skin
+dropped to zero, its leaves are kept and their bounds refitted every frame until they drift apart.
+The sort starts from last frame's order, where the codes are almost sorted, and repairs it
+(own/coherent.py).
 
 A node covers a contiguous range of the sorted objects: it splits where the highest bit that
 differs within its range turns from 0 to 1 (in the middle when all codes are equal), and ranges
@@ -85,7 +87,8 @@ bvh_build = tree_builder(centre_codes, bvh_nodes)
 
 
 class LinearBvh(StaticsApart, SmallScenes, MortonTree):
-    """Linear BVH over Morton-sorted centres, built again past its skin; at most `leaf_size` objects per
+    """Linear BVH over Morton-sorted centres, built again past its skin (refitted in between where
+    everything moves, own/tree.py); at most `leaf_size` objects per
     leaf (16: in the tuning study over the families, docs/TUNING.md, within 1.19x of each scene's
     best leaf size, 1.02x on average; 8 was up to 1.34x off, 4 up to 2.2x). `coherent` takes the
     objects in last frame's sorted order and repairs it, and keeps the tree under its skin (False
@@ -96,6 +99,7 @@ class LinearBvh(StaticsApart, SmallScenes, MortonTree):
     defaults = {"leaf_size": 16, "coherent": True}
     sweeps = (Knob("leaf_size", fixed([1, 2, 4, 8, 16, 32]), "objects per leaf"),)
     build = staticmethod(bvh_build)
+    refits = True
 
     def __init__(self, **params):
         super().__init__(**params)

@@ -74,9 +74,11 @@ class SkinSchedule:
         self._short = 0  # builds in a row that lived one frame
         self._halved_from = 0.0  # the skin the last build was halved from (0: it was not)
 
-    def next(self, lived: int, extra: float = 0.0) -> float:
-        """The skin for the next build, after one that lived `lived` frames with `extra` pairs per
-        object beyond those that overlapped."""
+    def next(self, lived: int, kept: int | None = None, overlapping: int | None = None, n: int = 1) -> float:
+        """The skin for the next build, after one that lived `lived` frames and kept `kept` pairs
+        for its `n` objects, of which `overlapping` overlapped in the last frame asked for them
+        (None where none was asked: no pairs beyond them counted)."""
+        extra = (kept - overlapping) / max(n, 1) if kept is not None and overlapping is not None else 0.0
         self._short = self._short + 1 if lived < SHRINK_BELOW else 0
         halved_from, self._halved_from = self._halved_from, 0.0
         if self.skin == 0.0:

@@ -110,9 +110,8 @@ class VerletList(StaticsApart, BroadPhase):
         every = self.params["every"]
         due = (self._since >= every) if every is not None else largest_step(positions, self._anchor) > 0.5 * self._skin
         if due:
-            if self._adapts:  # listed pairs per object beyond those that overlapped in the last frame
-                extra = 0.0 if self._overlapping is None else (len(self._list) - self._overlapping) / max(len(positions), 1)
-                self._skin = self._schedule.next(self._since, extra)
+            if self._adapts:
+                self._skin = self._schedule.next(self._since, len(self._list), self._overlapping, len(positions))
             self._build(positions)
             self._stats["rebuilds"] += 1
             self._stats["skin"] = self._skin

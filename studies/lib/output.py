@@ -41,11 +41,11 @@ def docs_folder() -> Path:
 
 def report_folder(args, out: Path, meta: dict[str, Any] | None = None) -> Path:
     """Where a study's report goes: --report-dir, else docs/ for a full run, else the run's own
-    folder. On --report-only, whether the run was full comes from its meta.json, never from the
-    options of the report command: a quick run's report must not replace the one in docs/."""
+    folder. Whether the run was full comes from `meta` (its meta.json) where given, never from the
+    options of a report command: a quick or narrowed run's report must not replace the one in docs/."""
     if getattr(args, "report_dir", None):
         return Path(args.report_dir)
-    full = (meta or {}).get("full", not args.quick) if args.report_only else not args.quick
+    full = meta.get("full", not args.quick) if meta else not args.quick
     return docs_folder() if full else Path(out)
 
 
