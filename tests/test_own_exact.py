@@ -13,6 +13,7 @@ from own import grid_incremental, grid_parallel
 from own.parallel import chunk_count
 from own.brute import brute_pairs
 from own.small import SmallScenes
+from own.tree import REFIT_RETRY
 from scenes import generate
 from scenes.motion import simulate
 from scenes.stress import STRESS_SCENES
@@ -554,7 +555,8 @@ def test_trees_keep_their_structure_while_nothing_moves_past_the_skin():
 def test_bvh_refits_its_leaves_where_neighbours_move_together_and_builds_once_they_scatter():
     """A packed disc turning fast: every object moves past any skin each frame, but its neighbours
     move with it, so the BVH keeps its leaves and refits their bounds (the quadtree, whose leaves
-    are cells, is built every frame); shuffled, the leaves scatter and the BVH is built again."""
+    are cells, is built every frame); shuffled, the leaves scatter and the BVH is built again, and
+    refitted again only after REFIT_RETRY builds."""
     rng = np.random.default_rng(3)
     radius, angle = np.sqrt(rng.random(1500)) * 300.0, rng.random(1500) * 2 * np.pi
     radii = rng.uniform(4.0, 8.0, 1500)
@@ -577,12 +579,23 @@ def test_bvh_refits_its_leaves_where_neighbours_move_together_and_builds_once_th
     for positions in frames[1:4]:
         bvh.update(positions)
         bvh.pairs()
-    builds = bvh.stats()["builds"]
-    for _ in range(2):  # refitted over scattered leaves, found scattered, built again
+    builds, refits = bvh.stats()["builds"], bvh.stats()["refits"]
+
+    def shuffled_frame():
         positions = rng.permutation(frames[4])
         bvh.update(positions)
         assert np.array_equal(np.sort(keys(bvh.pairs(), 1500)), keys(brute_pairs(positions, radii), 1500))
-    assert bvh.stats()["builds"] == builds + 1
+
+    for _ in range(2):  # refitted over scattered leaves, found scattered, built again
+        shuffled_frame()
+    assert bvh.stats()["builds"] == builds + 1 and bvh.stats()["refits"] == refits + 1
+    shuffled_frame()  # refitted right after that build: apart at once
+    assert bvh.stats()["refits"] == refits + 2
+    for _ in range(REFIT_RETRY):  # so built the next frames, no refit tried
+        shuffled_frame()
+    assert bvh.stats()["builds"] == builds + 1 + REFIT_RETRY and bvh.stats()["refits"] == refits + 2
+    bvh.update(frames[4])
+    assert bvh.stats()["refits"] == refits + 3  # then tried again
 
 
 @pytest.mark.parametrize("name", ["own.verlet", "own.quadtree", "own.bvh"])

@@ -45,6 +45,11 @@ TREE_SKIN_DIAMETERS, LARGEST_TREE_SKIN_DIAMETERS = 0.25, 1.0
 # tumbler at n = 4096 and the moving pile at 65536), so that drifting leaves never cost more than a
 # build would have. Between 0.15 and 1.2 the times there and on smash were within the noise.
 REFIT_DRIFT = 0.5
+# Where the leaves drifted apart in the first refitted frame (movers that scatter, as in the level
+# at n = 65536: a build and a loose search every two frames, 5 to 15% slower than building every
+# frame), the tree is built this many frames before a refit is tried again (there still 5 to 10%
+# slower than never refitting, measured; 25 to 35% faster on the tumbler, smash and moving pile).
+REFIT_RETRY = 8
 
 
 def tree_builder(key_kernel, node_kernel):
@@ -232,7 +237,8 @@ def tree_pairs(order, box, nodes, bounds, buf):
 class MortonTree(BroadPhase):
     """A tree over Morton-sorted objects, built anew from last frame's order when an object has
     moved past its skin. Where the skin dropped to zero, a tree with `refits` keeps its leaves
-    and refits their bounds to the exact boxes until they have drifted apart (REFIT_DRIFT); one
+    and refits their bounds to the exact boxes until they have drifted apart (REFIT_DRIFT; after
+    leaves apart at the first refit, it builds REFIT_RETRY frames before trying again); one
     without builds every frame. A subclass sets `build` (made by tree_builder), `_depth` and
     `_capacity`, and has a `coherent` parameter: False sorts from the input order and builds
     every frame, to measure what coherence saves."""
@@ -266,7 +272,7 @@ class MortonTree(BroadPhase):
             self._skin = self._skins.skin if self.params["coherent"] else 0.0
         self._kept = None  # the pairs of the boxes grown by half the skin, found at the build, while kept
         self._overlapping = None  # the pairs that overlapped in the last frame asked for them
-        self._builds = self._refits = 0
+        self._builds = self._refits = self._refit_wait = 0
         self._build(positions)
 
     def _update(self, positions):
@@ -278,9 +284,11 @@ class MortonTree(BroadPhase):
         if self.params["coherent"]:
             kept = len(self._kept) if self._kept is not None else None
             self._skin = self._skins.next(self._since, kept, self._overlapping, self.n)
-            if self.refits and self._skin == 0.0 and self._anchor is None and not self._stale:
+            if self.refits and self._skin == 0.0 and self._anchor is None and not self._stale \
+                    and self._refit_wait == 0:
                 self._refit(positions)
                 return
+        self._refit_wait = max(self._refit_wait - 1, 0)
         self._build(positions)
 
     def _refit(self, positions):
@@ -288,7 +296,7 @@ class MortonTree(BroadPhase):
         leaves kept, their bounds refitted."""
         self._positions = positions
         self._bounds = refit(positions, self.radii, self._order, self._box, self._nodes)
-        self._since, self._refits, self._refitted = 0, self._refits + 1, True
+        self._since, self._refits, self._refitted = 0, self._refits + 1, self._refitted + 1
         self._stats = {**self._stats, "refits": self._refits, "reused": 0}
 
     def _build(self, positions):
@@ -305,7 +313,7 @@ class MortonTree(BroadPhase):
         self._schedule.record(repair, swaps)
         self._order, self._spare_order = self._spare_order, self._order
         self._since, self._builds, self._kept = 0, self._builds + 1, None
-        self._refitted, self._stale, self._visited_at_build, self._drift = False, False, None, 0.0
+        self._refitted, self._stale, self._visited_at_build, self._drift = 0, False, None, 0.0  # refits since this build
         self._anchor = positions.copy() if self._skin > 0.0 else None  # where the boxes were grown from
         self._stats = {"nodes": len(self._nodes), "swaps": swaps, "builds": self._builds, "skin": self._skin,
                        "reused": 0, "refits": self._refits}
@@ -319,6 +327,8 @@ class MortonTree(BroadPhase):
             elif self._visited_at_build is not None:  # how far the refitted leaves have drifted apart
                 self._drift += max(visited / max(self._visited_at_build, 1) - 1.0, 0.0)
                 self._stale = self._drift >= REFIT_DRIFT  # then sort and build again next frame
+                if self._stale and self._refitted == 1:  # apart at once: build a while before trying again
+                    self._refit_wait = REFIT_RETRY
             return out
         if self._kept is None:  # the frame of the build: the grown boxes' pairs, kept
             self._kept, (self._stats["visited"],) = self._keep(tree_pairs, self._order, self._box, self._nodes,
