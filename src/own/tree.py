@@ -52,6 +52,12 @@ REFIT_DRIFT = 0.5
 REFIT_RETRY = 8
 
 
+@nb.njit(cache=True, inline="always")
+def set_box(box, a, x, y, r):
+    """Slot a of `box` (rows lx, hx, ly, hy): the box of the circle (x, y, r)."""
+    box[0, a], box[1, a], box[2, a], box[3, a] = x - r, x + r, y - r, y + r
+
+
 def tree_builder(key_kernel, node_kernel):
     """A tree's compiled build from its two kernels: `key_kernel(xy, sr, x0, y0, size, depth,
     keys)` writes each object's key on the lattice square (x0, y0, size), and
@@ -78,8 +84,7 @@ def tree_builder(key_kernel, node_kernel):
         for a in range(n):  # perm is almost the identity: near-sequential reads
             j = perm[a]
             order[a] = j if fresh else last_order[j]
-            x, y, r = xy[j, 0], xy[j, 1], sr[j]
-            box[0, a], box[1, a], box[2, a], box[3, a] = x - r, x + r, y - r, y + r
+            set_box(box, a, xy[j, 0], xy[j, 1], sr[j])
         nodes = node_kernel(keys, depth, capacity)
         return nodes, tree_bounds(nodes, box), swaps
 
@@ -92,8 +97,7 @@ def refit(positions, radii, order, box, nodes):
     table: the tree keeps its leaves, wherever their objects have gone."""
     for a in range(order.shape[0]):
         j = order[a]
-        x, y, r = positions[j, 0], positions[j, 1], radii[j]
-        box[0, a], box[1, a], box[2, a], box[3, a] = x - r, x + r, y - r, y + r
+        set_box(box, a, positions[j, 0], positions[j, 1], radii[j])
     return tree_bounds(nodes, box)
 
 
@@ -284,7 +288,7 @@ class MortonTree(BroadPhase):
         if self.params["coherent"]:
             kept = len(self._kept) if self._kept is not None else None
             self._skin = self._skins.next(self._since, kept, self._overlapping, self.n)
-            if self.refits and self._skin == 0.0 and self._anchor is None and not self._stale \
+            if self.refits and self._skin == 0.0 and self._anchor is None and self._drift < REFIT_DRIFT \
                     and self._refit_wait == 0:
                 self._refit(positions)
                 return
@@ -313,7 +317,7 @@ class MortonTree(BroadPhase):
         self._schedule.record(repair, swaps)
         self._order, self._spare_order = self._spare_order, self._order
         self._since, self._builds, self._kept = 0, self._builds + 1, None
-        self._refitted, self._stale, self._visited_at_build, self._drift = 0, False, None, 0.0  # refits since this build
+        self._refitted, self._visited_at_build, self._drift = 0, None, 0.0  # refits since this build, ...
         self._anchor = positions.copy() if self._skin > 0.0 else None  # where the boxes were grown from
         self._stats = {"nodes": len(self._nodes), "swaps": swaps, "builds": self._builds, "skin": self._skin,
                        "reused": 0, "refits": self._refits}
@@ -326,8 +330,8 @@ class MortonTree(BroadPhase):
                 self._visited_at_build = visited
             elif self._visited_at_build is not None:  # how far the refitted leaves have drifted apart
                 self._drift += max(visited / max(self._visited_at_build, 1) - 1.0, 0.0)
-                self._stale = self._drift >= REFIT_DRIFT  # then sort and build again next frame
-                if self._stale and self._refitted == 1:  # apart at once: build a while before trying again
+                # Past REFIT_DRIFT, sorted and built again next frame; apart at once: built a while.
+                if self._drift >= REFIT_DRIFT and self._refitted == 1:
                     self._refit_wait = REFIT_RETRY
             return out
         if self._kept is None:  # the frame of the build: the grown boxes' pairs, kept
