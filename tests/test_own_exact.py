@@ -524,7 +524,7 @@ def test_verlet_list_is_exact_under_its_rebuild_rule_across_stepped_frames(scene
        seed=st.integers(0, 2**16))
 def test_trees_are_exact_while_kept_under_their_skin_across_stepped_frames(name, scene, steps, seed):
     """Steps within the trees' skin (the tree kept, the pairs of its grown boxes tested) and past it
-    (built again, the skin adapting; once it is zero, a BVH refitted until its leaves drift apart):
+    (built again, the skin adapting; once it is zero, refitted until the leaves drift apart):
     every frame's pairs are the box overlaps."""
     positions, radii = scene
     positions, radii = np.asarray(positions, dtype=float).reshape(-1, 2), np.asarray(radii, dtype=float)
@@ -552,10 +552,10 @@ def test_trees_keep_their_structure_while_nothing_moves_past_the_skin():
     assert tree.stats()["reused"] == 0 and tree.stats()["builds"] == 2
 
 
-def test_bvh_refits_its_leaves_where_neighbours_move_together_and_builds_once_they_scatter():
+def test_trees_refit_their_leaves_where_neighbours_move_together_and_build_once_they_scatter():
     """A packed disc turning fast: every object moves past any skin each frame, but its neighbours
-    move with it, so the BVH keeps its leaves and refits their bounds (the quadtree, whose leaves
-    are cells, is built every frame); shuffled, the leaves scatter and the BVH is built again, and
+    move with it, so the trees keep their leaves and refit their bounds (the quadtree's cells grow
+    loose, its bounds exact); shuffled, the leaves scatter and the tree is built again, and
     refitted again only after REFIT_RETRY builds."""
     rng = np.random.default_rng(3)
     radius, angle = np.sqrt(rng.random(1500)) * 300.0, rng.random(1500) * 2 * np.pi
@@ -570,10 +570,7 @@ def test_bvh_refits_its_leaves_where_neighbours_move_together_and_builds_once_th
             tree.validate()
             assert np.array_equal(np.sort(keys(tree.pairs(), 1500)), keys(brute_pairs(positions, radii), 1500))
         assert tree._skin == 0.0
-        if name == "own.bvh":
-            assert tree.stats()["refits"] >= 20 and tree.stats()["builds"] <= 6, tree.stats()
-        else:
-            assert tree.stats()["refits"] == 0 and tree.stats()["builds"] == 30, tree.stats()
+        assert tree.stats()["refits"] >= 20 and tree.stats()["builds"] <= 6, tree.stats()
     bvh = engines.create("own.bvh")
     bvh.reset(frames[0], radii)
     for positions in frames[1:4]:
@@ -714,7 +711,7 @@ def test_trees_keep_their_lattice_while_the_boxes_stay_inside_and_retry_a_failed
         positions = rng.permutation(scene.positions)
         builds = tree.stats()["builds"]
         tree.update(positions)
-        if tree.stats()["builds"] > builds:  # (a BVH refits its leaves in between, and finds them scattered)
+        if tree.stats()["builds"] > builds:  # (refitted in between, its leaves found scattered)
             tried.append(tree.stats()["swaps"])
         tree.validate()
         assert set(map(tuple, tree.pairs().tolist())) == set(map(tuple, brute_pairs(positions, scene.radii).tolist()))

@@ -99,7 +99,6 @@ class LinearBvh(StaticsApart, SmallScenes, MortonTree):
     defaults = {"leaf_size": 16, "coherent": True}
     sweeps = (Knob("leaf_size", fixed([1, 2, 4, 8, 16, 32]), "objects per leaf"),)
     build = staticmethod(bvh_build)
-    refits = True
 
     def __init__(self, **params):
         super().__init__(**params)

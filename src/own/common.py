@@ -170,10 +170,12 @@ class PairCollector:
 @nb.njit(cache=True, inline="always")
 def meet_mask(cols, c, m, x0, x1, y0, y1):
     """Bit t set for each of the m <= 64 boxes from slot c of `cols` (rows lx, hx, ly, hy) that
-    meets the box x0..x1, y0..y1 (closed intervals): a loop the compiler vectorises."""
+    meets the box x0..x1, y0..y1 (closed intervals): a loop the compiler vectorises. The slot is
+    indexed unsigned: a signed index gets numba's wrap-around for negative indices, which made
+    the compiler gather every lane (4x slower, measured: 15 ns against 3.7 for 15 boxes)."""
     mask = np.uint64(0)
     for t in range(m):
-        b = c + t
+        b = nb.uint64(c + t)
         hit = (cols[0, b] <= x1) & (cols[1, b] >= x0) & (cols[2, b] <= y1) & (cols[3, b] >= y0)
         mask |= np.uint64(hit) << np.uint64(t)
     return mask
