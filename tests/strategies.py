@@ -100,3 +100,28 @@ BAD_SCENE_FILES = [
     ("# box: 0,0,oops,1\nx,y,r\n1,1,1\n", "line 1: bad box line"),
     ("# box: 0,0,1,1\nx,y,r\n1,1,1\n2,2,x\n", "line 4: column r is not a number"),
 ]
+
+
+@st.composite
+def sphere_scenes(draw, max_n: int = 150):
+    """Spheres (positions (n, 3)): uniform in a cube with equal, mixed, tiny or huge radii; on a
+    half-integer lattice with radii that make boxes touch exactly; duplicated points, a flat layer
+    (z = 0) or a line; far from the origin."""
+    n = draw(st.integers(0, max_n))
+    rng = np.random.default_rng(draw(st.integers(0, 2**31 - 1)))
+    kind = draw(st.sampled_from(["uniform", "lattice", "duplicates", "layer", "line"]))
+    if kind == "lattice":
+        positions = rng.integers(0, 13, (n, 3)) * 0.5
+        radii = rng.choice([0.0, 0.25, 0.5, 1.0], n)
+    else:
+        positions = rng.uniform(0, 300, (n, 3))
+        if kind == "duplicates":
+            positions = positions[rng.integers(0, max(1, n // 4), n)] if n else positions
+        elif kind == "layer":
+            positions[:, 2] = 0.0
+        elif kind == "line":
+            positions[:, 1:] = 7.0
+        sizes = draw(st.sampled_from([10.0, 1e-6, 3000.0, 0.0, "mixed"]))
+        radii = np.exp(rng.uniform(np.log(0.5), np.log(60.0), n)) if sizes == "mixed" else np.full(n, sizes)
+    shift = draw(st.sampled_from([0.0, -1000.0, 1e6, 1e300]))
+    return positions + shift, radii

@@ -70,7 +70,7 @@ def test_patterns_match_globs_and_reject_typos():
         ([[0.0, 0.0]], [-1.0], "radius 0 is negative"),
         ([[0.0, 0.0]], [np.nan], "radius 0 is not finite"),
         ([0.0, 0.0, 1.0], [1.0], r"positions must have shape \(n, 2\)"),
-        ([[0.0, 0.0, 0.0]], [1.0], r"positions must have shape \(n, 2\)"),
+        ([[0.0, 0.0, 0.0, 0.0]], [1.0], r"positions must have shape \(n, 2\)"),
         ([[0.0, 0.0]], [1.0, 2.0], r"radii must have shape \(1,\)"),
     ],
 )

@@ -138,6 +138,9 @@ class BroadPhase(ABC):
     limits: ClassVar[Limits] = NO_LIMITS
     lifecycle: ClassVar[Lifecycle] = "rebuild"
     statics_held_apart: ClassVar[bool] = False  # "rebuild" without statics inside (own/statics.py)
+    # The dimensions it works in: positions (n, 2), circles in a plane, and (n, 3), spheres, where
+    # it has 3 here. It works in the dimension of the positions it was reset with.
+    dims: ClassVar[tuple[int, ...]] = (2,)
 
     def __init__(self, **params: Any) -> None:
         unknown = sorted(set(params) - set(self.defaults))
@@ -150,6 +153,7 @@ class BroadPhase(ABC):
         self.radii = np.empty(0)
         self._stats: dict[str, float] = {}
         self.objects = 0  # every object id, alive or not
+        self.dim = 2  # of the positions it was reset with
         self.static: np.ndarray | None = None
         self.alive: np.ndarray | None = None
         self.spawned = self.removed = NO_IDS  # this frame's, for "native" backends
@@ -157,9 +161,10 @@ class BroadPhase(ABC):
 
     def reset(self, positions: npt.ArrayLike, radii: npt.ArrayLike, static: npt.ArrayLike | None = None,
               alive: npt.ArrayLike | None = None) -> None:
-        """Build from scratch for these objects (positions (n, 2), radii (n,)); `static` (n,) bool
-        marks objects that never move, `alive` (n,) bool the objects that exist now (default all)."""
-        pos = check_positions(positions)
+        """Build from scratch for these objects (positions (n, 2), or (n, 3) where `dims` has 3;
+        radii (n,)); `static` (n,) bool marks objects that never move, `alive` (n,) bool the objects
+        that exist now (default all)."""
+        pos = self._positions_to_reset(positions)
         n = pos.shape[0]
         radii = check_radii(radii, n)
         self.static, self.alive = check_mask(static, (n,), "static"), check_mask(alive, (n,), "alive")
@@ -179,7 +184,7 @@ class BroadPhase(ABC):
         which exist now, where objects appear or disappear (None: the same as before)."""
         if not self._built:
             raise RuntimeError(f"{self.name}: call reset(positions, radii) before update()")
-        pos = check_positions(positions, self.objects)
+        pos = check_positions(positions, self.objects, dims=(self.dim,))
         self._check_limits(pos)
         changed = False
         if alive is not None:
@@ -198,6 +203,18 @@ class BroadPhase(ABC):
             self._update(self._held_positions)
         if changed:
             self.spawned = self.removed = NO_IDS
+
+    def _positions_to_reset(self, positions: npt.ArrayLike) -> np.ndarray:
+        """The positions checked, in a dimension this backend works in (a one-line error naming it
+        otherwise), which it works in from now on."""
+        arr = np.asarray(positions)
+        if arr.ndim == 2 and arr.shape[1] in (2, 3) and arr.shape[1] not in self.dims:
+            spaces = " and ".join(f"{d}D" for d in self.dims)
+            raise ValueError(f"{self.name} works in {spaces} only: positions must have shape (n, {self.dims[0]}), "
+                             f"got {arr.shape}")
+        pos = check_positions(arr, dims=self.dims)
+        self.dim = pos.shape[1]
+        return pos
 
     def _rebuild(self, positions: np.ndarray) -> None:
         """"rebuild" lifecycle: build the backend anew on the objects alive now."""

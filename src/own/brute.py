@@ -1,4 +1,5 @@
-"""All-pairs reference: every pair whose boxes overlap, by vectorised numpy in row blocks."""
+"""All-pairs reference: every pair whose boxes overlap, by vectorised numpy in row blocks, in 2D
+or 3D."""
 
 from __future__ import annotations
 
@@ -21,11 +22,9 @@ def brute_pairs(positions: np.ndarray, radii: np.ndarray) -> PairArray:
     step = max(1, _BLOCK_CELLS // max(n, 1))
     for start in range(0, n, step):
         rows = np.arange(start, min(n, start + step))
-        hit = (
-            (lo[None, :, 0] <= hi[rows, None, 0]) & (lo[rows, None, 0] <= hi[None, :, 0])
-            & (lo[None, :, 1] <= hi[rows, None, 1]) & (lo[rows, None, 1] <= hi[None, :, 1])
-        )
-        hit &= np.arange(n)[None, :] > rows[:, None]  # upper triangle: i < j, no self-pairs
+        hit = np.arange(n)[None, :] > rows[:, None]  # upper triangle: i < j, no self-pairs
+        for a in range(lo.shape[1]):
+            hit &= (lo[None, :, a] <= hi[rows, None, a]) & (lo[rows, None, a] <= hi[None, :, a])
         i, j = np.nonzero(hit)
         found.append(np.column_stack([rows[i], j]))
     if not found:
@@ -38,6 +37,7 @@ class Brute(StaticsApart, BroadPhase):
 
     name = "own.brute"
     method = "brute"
+    dims = (2, 3)
 
     def _reset(self, positions, radii):
         self._pos = positions

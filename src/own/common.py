@@ -17,11 +17,11 @@ from numba.extending import overload
 
 @nb.njit(cache=True)
 def boxes(positions: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Lower and upper corners (n, 2) of the circles' axis-aligned boxes."""
+    """Lower and upper corners (n, d) of the circles' (or spheres') axis-aligned boxes."""
     lo = np.empty_like(positions)
     hi = np.empty_like(positions)
     for i in range(positions.shape[0]):
-        for a in range(2):
+        for a in range(positions.shape[1]):
             lo[i, a] = positions[i, a] - radii[i]
             hi[i, a] = positions[i, a] + radii[i]
     return lo, hi

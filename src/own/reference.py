@@ -1,5 +1,6 @@
-"""Ground truth for a frame: the exact box-overlap pairs, the truly overlapping circles, and the
-shared exact narrow phase that every backend's candidates go through."""
+"""Ground truth for a frame: the exact box-overlap pairs, the truly overlapping circles (or
+spheres, for positions (n, 3)), and the shared exact narrow phase that every backend's candidates
+go through."""
 
 from __future__ import annotations
 
@@ -8,8 +9,8 @@ import numpy as np
 
 from engines.base import PairArray
 
-# Above this many objects brute force is too slow; the exact grid (tested equal to brute
-# force on random and adversarial scenes) takes over.
+# Above this many objects brute force is too slow; the exact grid (own.grid in 2D, own/grid3d.py in
+# 3D: each tested equal to brute force on random and adversarial scenes) takes over.
 BRUTE_FORCE_LIMIT = 3000
 
 
@@ -25,6 +26,11 @@ def box_pairs(positions: np.ndarray, radii: np.ndarray, alive: np.ndarray | None
         from .brute import brute_pairs
 
         return brute_pairs(positions, radii)
+    if positions.shape[1] == 3:
+        from .grid3d import grid3_box_pairs
+
+        found = grid3_box_pairs(positions, radii)
+        return found[np.lexsort((found[:, 1], found[:, 0]))]
     from .grid import UniformGrid
 
     grid = UniformGrid()
@@ -34,7 +40,7 @@ def box_pairs(positions: np.ndarray, radii: np.ndarray, alive: np.ndarray | None
 
 
 def circle_pairs(positions: np.ndarray, radii: np.ndarray) -> PairArray:
-    """Every pair of circles that overlap or touch, sorted by (i, j)."""
+    """Every pair of circles (or spheres) that overlap or touch, sorted by (i, j)."""
     return narrow_phase(positions, radii, box_pairs(positions, radii))
 
 
@@ -42,9 +48,20 @@ def circle_pairs(positions: np.ndarray, radii: np.ndarray) -> PairArray:
 def narrow_phase(positions: np.ndarray, radii: np.ndarray, pairs: np.ndarray) -> PairArray:
     """The exact narrow phase shared by every backend: the candidate pairs whose circles truly
     overlap, distance <= r_i + r_j (touching counts). The rows are gathered in the same pass as
-    the test: numpy's boolean indexing of them cost twice the test itself at n = 2048."""
+    the test: numpy's boolean indexing of them cost twice the test itself at n = 2048. Spheres
+    (positions (n, 3)) in a loop of their own, so that the circles' loop stays as it was."""
     out = np.empty((pairs.shape[0], 2), dtype=pairs.dtype)
     count = 0
+    if positions.shape[1] == 3:
+        for k in range(pairs.shape[0]):
+            i, j = pairs[k, 0], pairs[k, 1]
+            dx = positions[j, 0] - positions[i, 0]
+            dy = positions[j, 1] - positions[i, 1]
+            dz = positions[j, 2] - positions[i, 2]
+            reach = radii[i] + radii[j]
+            out[count, 0], out[count, 1] = i, j
+            count += dx * dx + dy * dy + dz * dz <= reach * reach
+        return out[:count]
     for k in range(pairs.shape[0]):
         i, j = pairs[k, 0], pairs[k, 1]
         dx = positions[j, 0] - positions[i, 0]

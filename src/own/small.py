@@ -75,7 +75,7 @@ class SmallScenes:
                 setattr(cls, name, _unless_small(cls.__dict__[name], answer))
 
     def reset(self, positions, radii, static=None, alive=None) -> None:
-        pos = check_positions(positions)
+        pos = self._positions_to_reset(positions)
         radii = check_radii(radii, pos.shape[0])
         if pos.shape[0] > self.small_scene_n or static is not None or alive is not None:
             self._small = None  # statics and spawning go the base class's way (BroadPhase.lifecycle)
@@ -92,7 +92,7 @@ class SmallScenes:
             self._small = None
             super().reset(positions, self.radii, None, alive)
         else:
-            self._small = check_positions(positions, self.n)
+            self._small = check_positions(positions, self.n, dims=(self.dim,))
 
     def pairs(self):
         return super().pairs() if self._small is None else small_sweep(self._small, self.radii, self._order, self._lo)

@@ -19,10 +19,16 @@ class StaticsApart:
     """Mixin, first in the bases of a backend of ours whose lifecycle is "rebuild"."""
 
     _static_cells: StaticCells | None = None
-    statics_held_apart = True  # BroadPhase.pairs has no pairs of two statics to drop
+
+    @property
+    def statics_held_apart(self) -> bool:
+        """Whether BroadPhase.pairs has no pairs of two statics to drop: the statics' grid is 2D,
+        so spheres take the generic way, statics inside."""
+        return self.dim == 2
 
     def _rebuild(self, positions: np.ndarray) -> None:
-        if self.static is None:
+        if self.static is None or not self.statics_held_apart:
+            self._static_cells = None
             super()._rebuild(positions)
             return
         alive = self.alive if self.alive is not None else np.ones(self.objects, dtype=bool)

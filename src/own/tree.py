@@ -40,11 +40,10 @@ NO_CHILD = -1
 # The skin a tree starts with, and the most it grows to, in mean diameters (own/skin.py), as the
 # Verlet list's.
 TREE_SKIN_DIAMETERS, LARGEST_TREE_SKIN_DIAMETERS = 0.25, 1.0
-# A refitted tree is built again once the node pairs its pair searches visited
-# since the build exceed the build's own search, summed over those frames, by this share of one
-# search: about what a sort and build cost against a search (0.3 to 0.4 of it, measured on the
-# tumbler at n = 4096 and the moving pile at 65536), so that drifting leaves never cost more than a
-# build would have. Between 0.15 and 1.2 the times there and on smash were within the noise.
+# A refitted tree is built again once the node pairs its pair searches visited since the build
+# exceed the build's own search, summed over those frames, by this share of one search: about what
+# a sort and build cost against a search (0.3 to 0.4 of it, measured on the tumbler at n = 4096 and
+# the moving pile at 65536), so that drifting leaves never cost more than a build would have. Between 0.15 and 1.2 the times there and on smash were within the noise.
 REFIT_DRIFT = 0.5
 # Where the leaves drifted apart in the first refitted frame (movers that scatter, as in the level
 # at n = 65536: a build and a loose search every two frames, 5 to 15% slower than building every
@@ -198,9 +197,9 @@ def tree_pairs(order, box, nodes, bounds, buf):
     each other) and two overlapping nodes with each other (both split into their four child pairs,
     or the one that is not a leaf: 5 to 8% faster than splitting the one holding more objects, on
     the tumbler, smash and the moving pile), so every pair of leaves is reached at most once, by
-    one path from the root, and node pairs whose bounds do not meet are dropped as they are pushed. Against one descent from the
-    root per leaf, measured 2.1x faster on a settled pile at n = 65536 (the descents re-tested
-    the leaf's own ancestors and their neighbours every time)."""
+    one path from the root, and node pairs whose bounds do not meet are dropped as they are
+    pushed. Against one descent from the root per leaf, measured 2.1x faster on a settled pile at
+    n = 65536 (the descents re-tested the leaf's own ancestors and their neighbours every time)."""
     count = visited = 0
     if nodes.shape[0] == 0:
         return count, visited
@@ -251,9 +250,9 @@ class MortonTree(BroadPhase):
     """A tree over Morton-sorted objects, built anew from last frame's order when an object has
     moved past its skin. Where the skin dropped to zero, it keeps its leaves and refits their
     bounds to the exact boxes until they have drifted apart (REFIT_DRIFT; after leaves apart at
-    the first refit, it builds REFIT_RETRY frames before trying again). A subclass sets `build` (made by tree_builder), `_depth` and
-    `_capacity`, and has a `coherent` parameter: False sorts from the input order and builds
-    every frame, to measure what coherence saves."""
+    the first refit, it builds REFIT_RETRY frames before trying again). A subclass sets `build`
+    (made by tree_builder), `_depth` and `_capacity`, and has a `coherent` parameter: False sorts
+    from the input order and builds every frame, to measure what coherence saves."""
 
     build = None
 

@@ -35,11 +35,14 @@ def real_array(values: object, what: str) -> np.ndarray:
         raise ValueError(f"{what} must be real numbers, got values such as {shown(arr.ravel()[0])}") from None
 
 
-def check_positions(positions: object, n: int | None = None, what: str = "positions") -> FloatArray:
-    """Return `positions` as a C-contiguous (n, 2) float64 array, or raise ValueError naming the problem."""
+def check_positions(positions: object, n: int | None = None, what: str = "positions",
+                    dims: tuple[int, ...] = (2,)) -> FloatArray:
+    """Return `positions` as a C-contiguous (n, d) float64 array, d one of `dims` (2: circles in a
+    plane, 3: spheres), or raise ValueError naming the problem."""
     arr = real_array(positions, what)
-    if arr.ndim != 2 or arr.shape[1] != 2:
-        raise ValueError(f"{what} must have shape (n, 2), got {arr.shape}")
+    if arr.ndim != 2 or arr.shape[1] not in dims:
+        shapes = " or ".join(f"(n, {d})" for d in dims)
+        raise ValueError(f"{what} must have shape {shapes}, got {arr.shape}")
     if n is not None and arr.shape[0] != n:
         raise ValueError(f"{what} has {arr.shape[0]} rows but the scene has {n} objects")
     arr = np.ascontiguousarray(arr)
@@ -53,7 +56,7 @@ def check_positions(positions: object, n: int | None = None, what: str = "positi
 
 @nb.njit(cache=True, fastmath={"reassoc"})
 def _sum(values: FloatArray) -> float:
-    """Sum of a contiguous (n, 2) array in any order, so that the compiler vectorises it; NaN and
+    """Sum of a contiguous (n, d) array in any order, so that the compiler vectorises it; NaN and
     infinities still propagate (no fast-math flag assumes them away). Every frame's positions pass
     through here: at n = 2048 it takes 0.5 us, against 0.8 for a dot product and 2.1 for
     ndarray.sum() (and the array is taken as it is: reshaping it first cost 0.17 us more)."""

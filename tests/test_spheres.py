@@ -1,0 +1,117 @@
+"""Spheres: positions (n, 3) at the interface, the exact reference and narrow phase in 3D, and the
+backends that work in 3D checked against it (the 2D-only ones refuse (n, 3) in one line)."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+
+import engines
+from engines.pairs import keys
+from own.brute import brute_pairs
+from own.grid3d import grid3_box_pairs
+from own.reference import BRUTE_FORCE_LIMIT, box_pairs, circle_pairs, narrow_phase
+from scenes.scene import check_positions
+from strategies import sphere_scenes
+
+
+def loop_box_pairs(positions, radii):
+    """The box overlaps by the definition, pair by pair (closed intervals on every axis)."""
+    lo, hi = positions - radii[:, None], positions + radii[:, None]
+    return [(i, j) for i, j in itertools.combinations(range(len(positions)), 2)
+            if ((lo[i] <= hi[j]) & (lo[j] <= hi[i])).all()]
+
+
+def test_positions_take_three_columns_where_asked():
+    assert check_positions(np.zeros((4, 3)), dims=(2, 3)).shape == (4, 3)
+    with pytest.raises(ValueError, match=r"must have shape \(n, 2\) or \(n, 3\), got \(4, 4\)"):
+        check_positions(np.zeros((4, 4)), dims=(2, 3))
+    with pytest.raises(ValueError, match=r"must have shape \(n, 2\), got \(4, 3\)"):
+        check_positions(np.zeros((4, 3)))
+
+
+@pytest.mark.parametrize("name", [name for name in engines.available() if 3 not in engines.backend_class(name).dims])
+def test_a_backend_that_works_in_2d_only_refuses_spheres_in_one_line(name):
+    with pytest.raises(ValueError, match=rf"^{name} works in 2D only: positions must have shape \(n, 2\), got \(5, 3\)$"):
+        engines.create(name).reset(np.zeros((5, 3)), np.ones(5))
+
+
+def test_a_backend_keeps_the_dimension_it_was_reset_with():
+    brute = engines.create("own.brute")
+    brute.reset(np.zeros((3, 3)), np.ones(3))
+    assert brute.dim == 3
+    with pytest.raises(ValueError, match=r"must have shape \(n, 3\), got \(3, 2\)"):
+        brute.update(np.zeros((3, 2)))
+    brute.reset(np.zeros((3, 2)), np.ones(3))  # a reset may change it
+    assert brute.dim == 2 and len(brute.pairs()) == 3
+
+
+def test_boundary_cases_in_3d():
+    touching = np.array([[0.0, 0.0, 0.0], [2.0, 2.0, 2.0]])  # boxes touch at a corner
+    apart = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 2.0 + 1e-12]])  # apart on z alone
+    assert brute_pairs(touching, np.ones(2)).tolist() == [[0, 1]]
+    assert brute_pairs(apart, np.ones(2)).tolist() == []
+    assert grid3_box_pairs(touching, np.ones(2)).tolist() == [[0, 1]]
+    assert grid3_box_pairs(apart, np.ones(2)).tolist() == []
+    # Boxes touch at the corner, spheres do not; spheres touching on z count.
+    assert narrow_phase(touching, np.ones(2), brute_pairs(touching, np.ones(2))).tolist() == []
+    on_z = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 2.0]])
+    assert circle_pairs(on_z, np.ones(2)).tolist() == [[0, 1]]
+
+
+@settings(max_examples=150)
+@given(scene=sphere_scenes(max_n=40))
+def test_brute_force_in_3d_is_the_definition(scene):
+    positions, radii = scene
+    assert [tuple(p) for p in brute_pairs(positions, radii).tolist()] == loop_box_pairs(positions, radii)
+
+
+@settings(max_examples=200)
+@given(scene=sphere_scenes())
+def test_the_3d_grid_finds_exactly_the_box_overlaps(scene):
+    positions, radii = scene
+    n = len(positions)
+    np.testing.assert_array_equal(np.sort(keys(grid3_box_pairs(positions, radii), n)),
+                                  keys(brute_pairs(positions, radii), n))
+
+
+def test_the_3d_reference_above_the_brute_force_limit_uses_the_grid():
+    rng = np.random.default_rng(5)
+    n = BRUTE_FORCE_LIMIT + 500
+    positions = rng.uniform(0, 400, (n, 3))
+    positions[: n // 3] = rng.normal(200, 15, (n // 3, 3))  # a dense cluster in a sparse gas
+    radii = np.exp(rng.uniform(np.log(1.0), np.log(12.0), n))
+    expected = brute_pairs(positions, radii)
+    assert len(expected) > n
+    np.testing.assert_array_equal(box_pairs(positions, radii), expected)
+
+
+@settings(max_examples=100)
+@given(scene=sphere_scenes(max_n=60))
+def test_the_narrow_phase_keeps_the_spheres_that_touch(scene):
+    positions, radii = scene
+    candidates = brute_pairs(positions, radii)
+    expected = [(i, j) for i, j in candidates.tolist()
+                if ((positions[j] - positions[i]) ** 2).sum() <= (radii[i] + radii[j]) ** 2]
+    assert [tuple(p) for p in narrow_phase(positions, radii, candidates).tolist()] == expected
+
+
+def test_own_brute_takes_spheres_with_statics_and_spawning():
+    rng = np.random.default_rng(2)
+    n = 300
+    frames = [rng.uniform(0, 120, (n, 3)) for _ in range(4)]
+    radii = rng.uniform(2.0, 8.0, n)
+    static = rng.random(n) < 0.4
+    for f in range(1, 4):
+        frames[f][static] = frames[0][static]
+    alive = [rng.random(n) < 0.8 for _ in range(4)]
+    brute = engines.create("own.brute")
+    brute.reset(frames[0], radii, static=static, alive=alive[0])
+    for f in range(4):
+        if f:
+            brute.update(frames[f], alive[f])
+        expected = box_pairs(frames[f], radii, alive=alive[f], static=static)
+        np.testing.assert_array_equal(np.sort(keys(brute.pairs(), n)), keys(expected, n))
