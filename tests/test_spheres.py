@@ -8,9 +8,10 @@ import itertools
 import numpy as np
 import pytest
 from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import engines
-from engines.pairs import keys
+from engines.pairs import is_canonical, keys
 from own.brute import brute_pairs
 from own.grid3d import grid3_box_pairs
 from own.reference import BRUTE_FORCE_LIMIT, box_pairs, circle_pairs, narrow_phase
@@ -99,7 +100,36 @@ def test_the_narrow_phase_keeps_the_spheres_that_touch(scene):
     assert [tuple(p) for p in narrow_phase(positions, radii, candidates).tolist()] == expected
 
 
-def test_own_brute_takes_spheres_with_statics_and_spawning():
+SPHERE_BACKENDS = [name for name in engines.available() if 3 in engines.backend_class(name).dims]
+
+
+def test_our_grid_works_in_3d():
+    assert "own.grid" in SPHERE_BACKENDS
+
+
+@pytest.mark.parametrize("name", SPHERE_BACKENDS)
+@settings(max_examples=40)
+@given(scene=sphere_scenes(), steps=st.lists(st.sampled_from([0.0, 0.01, 0.3, 3.0, 40.0]), min_size=1, max_size=6),
+       seed=st.integers(0, 2**16))
+def test_sphere_backends_find_exactly_the_box_overlaps_across_stepped_frames(name, scene, steps, seed):
+    positions, radii = scene
+    rng = np.random.default_rng(seed)
+    backend = engines.create(name)
+    backend.small_scene_n = 0  # the structure at every n
+    backend.reset(positions, radii)
+    n = len(positions)
+    for step in [None, *steps]:
+        if step is not None:
+            positions = positions + rng.uniform(-step, step, positions.shape)
+            backend.update(positions)
+        backend.validate()
+        got = backend.pairs()
+        assert is_canonical(got, n) is None
+        np.testing.assert_array_equal(np.sort(keys(got, n)), keys(brute_pairs(positions, radii), n))
+
+
+@pytest.mark.parametrize("name", SPHERE_BACKENDS)
+def test_sphere_backends_take_statics_and_spawning(name):
     rng = np.random.default_rng(2)
     n = 300
     frames = [rng.uniform(0, 120, (n, 3)) for _ in range(4)]
@@ -108,10 +138,15 @@ def test_own_brute_takes_spheres_with_statics_and_spawning():
     for f in range(1, 4):
         frames[f][static] = frames[0][static]
     alive = [rng.random(n) < 0.8 for _ in range(4)]
-    brute = engines.create("own.brute")
-    brute.reset(frames[0], radii, static=static, alive=alive[0])
+    backend = engines.create(name)
+    backend.reset(frames[0], radii, static=static, alive=alive[0])
     for f in range(4):
         if f:
-            brute.update(frames[f], alive[f])
+            backend.update(frames[f], alive[f])
         expected = box_pairs(frames[f], radii, alive=alive[f], static=static)
-        np.testing.assert_array_equal(np.sort(keys(brute.pairs(), n)), keys(expected, n))
+        np.testing.assert_array_equal(np.sort(keys(backend.pairs(), n)), keys(expected, n))
+
+
+def test_our_grid_refuses_a_cell_over_spheres_in_one_line():
+    with pytest.raises(ValueError, match=r"^own.grid: p and cell are not taken over spheres yet"):
+        engines.create("own.grid", cell=5.0).reset(np.zeros((3, 3)), np.ones(3))

@@ -171,7 +171,7 @@ class BroadPhase(ABC):
         self._check_limits(pos, radii)
         self.objects, self.spawned, self.removed, self._all_radii = n, NO_IDS, NO_IDS, radii
         self._built = False
-        if self.lifecycle == "native" or (self.static is None and self.alive is None):
+        if self._native_lifecycle() or (self.static is None and self.alive is None):
             self._alive_ids = None
             self.radii, self.n = radii, n
             self._reset(pos, self.radii)
@@ -194,7 +194,7 @@ class BroadPhase(ABC):
             if changed:
                 self.spawned, self.removed = np.flatnonzero(alive & ~before), np.flatnonzero(before & ~alive)
             self.alive = alive
-        if self._alive_ids is None and (self.lifecycle == "native" or not changed):
+        if self._alive_ids is None and (self._native_lifecycle() or not changed):
             self._update(pos)
         elif changed:
             self._rebuild(pos)
@@ -203,6 +203,11 @@ class BroadPhase(ABC):
             self._update(self._held_positions)
         if changed:
             self.spawned = self.removed = NO_IDS
+
+    def _native_lifecycle(self) -> bool:
+        """Whether statics and spawning reach it through its own means in the dimension it works
+        in now (`lifecycle`; a backend native in 2D only says so here)."""
+        return self.lifecycle == "native"
 
     def _positions_to_reset(self, positions: npt.ArrayLike) -> np.ndarray:
         """The positions checked, in a dimension this backend works in (a one-line error naming it

@@ -77,7 +77,7 @@ class SmallScenes:
     def reset(self, positions, radii, static=None, alive=None) -> None:
         pos = self._positions_to_reset(positions)
         radii = check_radii(radii, pos.shape[0])
-        if pos.shape[0] > self.small_scene_n or static is not None or alive is not None:
+        if pos.shape[0] > self.small_scene_n or pos.shape[1] != 2 or static is not None or alive is not None:
             self._small = None  # statics and spawning go the base class's way (BroadPhase.lifecycle)
             super().reset(pos, radii, static, alive)
             return
