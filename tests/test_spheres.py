@@ -150,3 +150,18 @@ def test_sphere_backends_take_statics_and_spawning(name):
 def test_our_grid_refuses_a_cell_over_spheres_in_one_line():
     with pytest.raises(ValueError, match=r"^own.grid: p and cell are not taken over spheres yet"):
         engines.create("own.grid", cell=5.0).reset(np.zeros((3, 3)), np.ones(3))
+
+
+def test_our_sweep_and_prune_works_in_3d_along_the_axis_asked():
+    assert {"own.sap", "own.sap_incremental"} <= set(SPHERE_BACKENDS) and "own.sap_parallel" not in SPHERE_BACKENDS
+    rng = np.random.default_rng(4)
+    positions, radii = rng.uniform(0, 100, (400, 3)), rng.uniform(1, 4, 400)
+    positions[:, 2] *= 20  # spread along z most
+    for axis, expected in (("auto", 2), ("x", 0), ("y", 1)):
+        sap = engines.create("own.sap_incremental", axis=axis)
+        sap.reset(positions, radii)
+        sap.update(positions + 0.01)  # the order kept and repaired
+        assert sap.stats()["axis"] == expected and sap.stats()["swaps"] >= 0
+        np.testing.assert_array_equal(np.sort(keys(sap.pairs(), 400)), keys(brute_pairs(positions + 0.01, radii), 400))
+    with pytest.raises(ValueError, match=r"^own.sap: strips='on', sweep='sparse' and parallel are not taken"):
+        engines.create("own.sap", strips="on").reset(positions, radii)

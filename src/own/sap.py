@@ -11,6 +11,7 @@ from engines.knobs import Knob, fixed
 from .common import PairCollector, emit, gather, insertion_sort
 from .parallel import ChunkedPairCollector
 from .radix import radix_argsort, sortable_bits
+from .sap3d import Sweep3
 from .small import SmallScenes
 from .statics import StaticsApart
 from .strips import strip_plan, strip_prepare, strip_sweep, strip_sweep_parallel
@@ -265,10 +266,16 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
     other axis (own/strips.py), "auto" where that at least halves the estimated sweep-axis
     overlaps: on a dense scene the plain sweep tests O(sqrt(n)) pairs per object, the strips a few.
     A strip sweep's "auto" axis is the one along which the boxes extend further.
+
+    Spheres (positions (n, 3)): the plain sweep in 3D, along x, y, or with "auto" the one of the
+    three along which the centres vary most, repaired between frames where incremental
+    (own/sap3d.py); strips "on", the sparse sweep and the parallel sweep are not taken there yet.
     """
 
     name = "own.sap"
     method = "sweep"
+    dims = (2, 3)
+    _sweep3: Sweep3 | None = None  # the state over spheres
     sweeps = (Knob("axis", fixed(["x", "y", "auto"]), "sweep axis"),
               Knob("sweep", fixed(["plain", "sparse", "auto"]), "sweep"),
               Knob("strips", fixed(["on", "off", "auto"]), "strips"))
@@ -287,6 +294,14 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         self._collect_chunks = ChunkedPairCollector() if self.params["parallel"] else None
 
     def _reset(self, positions, radii):
+        self._sweep3 = None
+        if self.dim == 3:
+            if self.params["strips"] == "on" or self.params["sweep"] == "sparse" or self.params["parallel"]:
+                raise ValueError(f"{self.name}: strips='on', sweep='sparse' and parallel are not taken over spheres "
+                                 "yet")
+            self._sweep3 = Sweep3(radii, self.params["axis"], self._incremental)
+            self._update(positions)
+            return
         n = self.n
         # The last scene's counts are no guide to this one.
         self._last_pairs, self._last_overlaps, self._float32_too_coarse = None, 0, False
@@ -330,6 +345,10 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
                 and not self._float32_too_coarse)
 
     def _update(self, positions):
+        if self._sweep3 is not None:
+            self._sweep3.update(positions)
+            self._stats = self._sweep3.stats()
+            return
         if self.params["strips"] != "off" and self._strip_update(positions):
             return
         self._strips = 0
@@ -370,6 +389,10 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         return out
 
     def _pairs(self):
+        if self._sweep3 is not None:
+            out = self._sweep3.pairs()
+            self._stats = self._sweep3.stats()
+            return out
         if self._strips:
             return self._strip_pairs()
         order, bounds32 = self._order[:self.n], self._bounds32 if self._sparse else self._no_bounds32
@@ -392,10 +415,15 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         return out
 
     def structure(self):
+        if self._sweep3 is not None:
+            return {}
         s_lo, s_hi = self._sorted[0], self._sorted[1]
         return {"intervals": np.column_stack([s_lo, s_hi]), "axis": np.array(self._stats["axis"])}
 
     def validate(self):
+        if self._sweep3 is not None:
+            self._sweep3.validate()
+            return
         order, s_lo = self._order[:self.n], self._sorted[0]
         assert np.array_equal(np.sort(order), np.arange(self.n)), "sort order is not a permutation"
         starts = self._strip_start[:self._strips + 1] if self._strips else np.array([0, self.n])
@@ -417,3 +445,4 @@ class ParallelSweepAndPrune(SweepAndPrune):
 
     name = "own.sap_parallel"
     defaults = {**SweepAndPrune.defaults, "incremental": True, "parallel": True}
+    dims = (2,)
