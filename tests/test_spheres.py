@@ -165,3 +165,14 @@ def test_our_sweep_and_prune_works_in_3d_along_the_axis_asked():
         np.testing.assert_array_equal(np.sort(keys(sap.pairs(), 400)), keys(brute_pairs(positions + 0.01, radii), 400))
     with pytest.raises(ValueError, match=r"^own.sap: strips='on', sweep='sparse' and parallel are not taken"):
         engines.create("own.sap", strips="on").reset(positions, radii)
+
+
+def test_the_3d_grid_stays_small_on_a_line_of_spheres():
+    n = 20000
+    positions = np.zeros((n, 3))
+    positions[:, 0] = np.arange(n) * 3.0  # far apart along x, nothing along y and z
+    grid = engines.create("own.grid")
+    grid.reset(positions, np.ones(n))
+    start = grid._cubes.slots[0]
+    assert len(start) <= 8 * n + 64 + 1
+    assert len(grid.pairs()) == 0

@@ -20,8 +20,8 @@ import numpy as np
 
 from .common import PairCollector, emit
 
-# At most this many cells per object (cells enlarged to fit): a few huge objects, or a few objects
-# far apart, cannot allocate an unbounded grid.
+# At most this many cells per object, counting the padding (cells enlarged to fit): a few huge
+# objects, or a few objects far apart or on a line, cannot allocate an unbounded grid.
 MAX_CELLS_PER_OBJECT = 8
 # Cells are this much wider than the largest diameter, relative: far above the rounding of a cell
 # index (a few ulps of the cell count), so objects whose boxes overlap are at most one cell apart.
@@ -47,9 +47,9 @@ def grid3_layout(positions: np.ndarray, radii: np.ndarray, layout: np.ndarray | 
     extent = hi - lo
     if not np.isfinite(extent).all():  # centres so far apart that their distance overflows: one cell
         return np.array([*lo, np.inf, 1, 1, 1], dtype=np.float64), True
-    most = MAX_CELLS_PER_OBJECT * len(positions) + 16
+    most = MAX_CELLS_PER_OBJECT * len(positions) + 64  # 64: room for one cell and its padding (27)
     cell = max(cell, float(extent.max()) / most) or 1.0  # (1.0: every object a point at one place)
-    while np.prod(np.floor(extent / cell) + 1) > most:
+    while np.prod(np.floor(extent / cell) + 3) > most:  # the cells with their padding (_padded)
         cell *= 1.25
     return np.array([*lo, cell, *(np.floor(extent / cell) + 1)], dtype=np.float64), True
 
