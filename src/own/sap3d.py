@@ -13,28 +13,25 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .common import PairCollector, emit, insertion_sort
-from .radix import radix_argsort, sortable_bits
-
-# A repair gives up past this many swaps per object (own/coherent.py's bound).
-MAX_SWAPS_PER_OBJECT = 16
+from .coherent import resort
+from .common import PairCollector, emit
+from .radix import sortable_bits
 
 
 @nb.njit(cache=True)
-def sweep3_prepare(positions, radii, axis, last_order, repair, order, keys, sorted_boxes):
+def sweep3_prepare(positions, radii, axis, last_order, repair, order, keys, perm, sorted_boxes):
     """This frame's order along `axis` into `order` (from `last_order`, repaired, where `repair`;
-    else sorted afresh) and the boxes in that order into `sorted_boxes` (rows: lo, hi along the
-    axis, then lo, hi along each other axis). Returns the insertion sort's swaps, -1 after a sort."""
+    else sorted afresh: own/coherent.py's resort) and the boxes in that order into `sorted_boxes`
+    (rows: lo, hi along the axis, then lo, hi along each other axis). `keys` and `perm` are work
+    arrays. Returns the insertion sort's swaps, -1 after a sort."""
     n = positions.shape[0]
     u, v = (axis + 1) % 3, (axis + 2) % 3
     for a in range(n):
         i = last_order[a] if repair else a
-        order[a] = i
         keys[a] = positions[i, axis] - radii[i]
-    swaps = insertion_sort(order, keys, MAX_SWAPS_PER_OBJECT) if repair else -1
-    if swaps < 0:
-        perm = radix_argsort(sortable_bits(keys))
-        order[:] = order[perm]
+    swaps = resort(sortable_bits(keys), perm, repair)
+    for a in range(n):
+        order[a] = last_order[perm[a]] if repair else perm[a]
     for a in range(n):
         i = order[a]
         r = radii[i]
@@ -86,7 +83,7 @@ class Sweep3:
         n = len(radii)
         self.radii, self.axis_mode, self.incremental = radii, axis, incremental
         self.order, self.spare = np.full(n, -1, dtype=np.int64), np.empty(n, dtype=np.int64)
-        self.keys, self.boxes = np.empty(n), np.empty((6, n))
+        self.keys, self.perm, self.boxes = np.empty(n), np.empty(n, dtype=np.int64), np.empty((6, n))
         self.axis, self.swaps, self.axis_hits = -1, -1, 0
         self._collect = PairCollector()
 
@@ -97,7 +94,8 @@ class Sweep3:
         else:
             axis = "xy".index(self.axis_mode)
         repair = self.incremental and axis == self.axis and len(positions) > 0 and self.order[0] >= 0
-        self.swaps = sweep3_prepare(positions, self.radii, axis, self.order, repair, self.spare, self.keys, self.boxes)
+        self.swaps = sweep3_prepare(positions, self.radii, axis, self.order, repair, self.spare, self.keys, self.perm,
+                                    self.boxes)
         self.order, self.spare, self.axis = self.spare, self.order, axis
 
     def pairs(self) -> np.ndarray:

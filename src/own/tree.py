@@ -43,7 +43,8 @@ TREE_SKIN_DIAMETERS, LARGEST_TREE_SKIN_DIAMETERS = 0.25, 1.0
 # A refitted tree is built again once the node pairs its pair searches visited since the build
 # exceed the build's own search, summed over those frames, by this share of one search: about what
 # a sort and build cost against a search (0.3 to 0.4 of it, measured on the tumbler at n = 4096 and
-# the moving pile at 65536), so that drifting leaves never cost more than a build would have. Between 0.15 and 1.2 the times there and on smash were within the noise.
+# the moving pile at 65536), so that drifting leaves never cost more than a build would have.
+# Between 0.15 and 1.2 the times there and on smash were within the noise.
 REFIT_DRIFT = 0.5
 # Where the leaves drifted apart in the first refitted frame (movers that scatter, as in the level
 # at n = 65536: a build and a loose search every two frames, 5 to 15% slower than building every
