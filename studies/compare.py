@@ -15,11 +15,11 @@ from pathlib import Path
 import engines
 from scenes import coverage
 
-from .lib.cli import Parser, command_line, matched_backends, run_cli, warn_unavailable
+from .lib.cli import Parser, command_line, in_dimension, matched_backends, run_cli, warn_unavailable
 from .lib.figures import error_against_time
 from .lib.harness import Job, scene_columns
 from .lib.options import (add_backends_option, add_output_options, add_quick_option, add_scene_options,
-                          add_trial_options, parse_checked, scene_from_args)
+                          add_trial_options, dim_of, parse_checked, scene_from_args)
 from .lib.output import Output, read_meta
 from .lib.pool import Pool
 from .lib.results import RowWriter, cpu_models_note, left_out_note, missed_total, ok_lines, read_rows, summarise
@@ -43,26 +43,32 @@ def parse(argv: list[str] | None):
     return parse_checked(parser(), argv)
 
 
-def list_backends() -> int:
+def list_backends(dim: int = 2) -> int:
+    """Every backend: available here (and in which dimensions), or why not; with --dim 3 the ones
+    that work in 2D only are marked so."""
     missing = engines.unavailable()
     for name in engines.names():
         if name in missing:
             print(f"{name:20} UNAVAILABLE  {missing[name]}")
-        else:
-            cls = engines.backend_class(name)
-            doc = (cls.__doc__ or "").strip().split("\n")[0]
-            print(f"{name:20} available    reports {cls.reports:<8} {doc}")
+            continue
+        cls = engines.backend_class(name)
+        doc = (cls.__doc__ or "").strip().split("\n")[0]
+        status = "available" if dim in cls.dims else "2D ONLY"
+        dims = "+".join(f"{d}D" for d in cls.dims)
+        print(f"{name:20} {status:<12} {dims:<6} reports {cls.reports:<8} {doc}")
+    if dim != 2:
+        print(f"2D ONLY: works with circles only, not run with --dim {dim}")
     return 0
 
 
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     if args.list:
-        return list_backends()
+        return list_backends(dim_of(args))
     if args.report_only:
         return report(Path(args.out), args.check)
-    chosen = matched_backends(args.backends)
     scene = scene_from_args(args)
+    chosen = in_dimension(matched_backends(args.backends), scene.dim)
     with Output(args.out, "compare", command_line("compare", argv), args.resume) as out:
         unavailable = warn_unavailable(chosen)
         runnable = [n for n in chosen if n not in unavailable]

@@ -88,7 +88,10 @@ BOUNDARY = {
 BAD_SCENE_FILES = [
     ("", "empty file"),
     ("x,y\n1,2\n", "line 1: header must be x,y,r.*missing r"),
-    ("x,y,r,z\n1,2,3,4\n", "line 1: .*unknown z"),
+    ("x,y,r,w\n1,2,3,4\n", "line 1: .*unknown w"),
+    ("x,y,z,r,vx,vy\n1,2,3,4,0,0\n", "line 1: spheres with velocities need vz"),
+    ("x,y,r,vz\n1,2,3,4\n", "line 1: vz needs a z column"),
+    ("# box: 0,0,1,1\nx,y,z,r\n1,1,1,1\n", "line 1: bad box line .*6 numbers"),
     ("x,y,r,vx\n1,2,3,4\n", "line 1: give both vx and vy"),
     ("x,y,r\n1,2,3\n1,2\n", "line 3: expected 3 columns"),
     ("x,y,r\n1,2,3\n1,2,3,4\n", "line 3: expected 3 columns"),

@@ -63,6 +63,47 @@ def test_the_report_names_the_parts_each_backend_left_out():
     assert left_out_note(rows[rows.backend == "own.quadtree"]) == ""
 
 
+def test_spheres_run_every_3d_backend_on_one_stepped_scene_and_name_the_2d_ones(tmp_path):
+    out = tmp_path / "run"
+    result = run_compare("--n", "300", "--dim", "3", "--quick", "--check", "--out", str(out))
+    assert result.returncode == 0, result.stderr[-2000:]
+    rows = pd.read_csv(out / "results.csv")
+    ran = set(rows.backend)
+    spheres = {n for n in registry.available() if 3 in registry.backend_class(n).dims}
+    assert ran == spheres and {"own.grid", "own.sap", "bullet.dbvt", "scipy.kdtree"} <= ran
+    assert (rows.dim == 3).all() and (rows.n == 300).all()
+    ok = rows[rows.status == "ok"]
+    assert (ok.groupby("frame")["true_pairs"].nunique() == 1).all() and ok.true_pairs.min() > 0
+    assert (ok[ok.backend.str.startswith("own.")]["missed"] == 0).all()
+    left_out = next(line for line in result.stdout.splitlines() if line.startswith("not run in 3D"))
+    assert "chipmunk.*" in left_out and "box2d.*" in left_out and "essay.*" in left_out
+    meta = json.loads((out / "meta.json").read_text())
+    assert len(meta["scene"]["box"]) == 6
+
+
+def test_a_3d_scene_file_runs_with_its_z_column_and_a_2d_backend_alone_is_refused(tmp_path, capsys):
+    scene = tmp_path / "balls.csv"
+    scene.write_text("x,y,z,r\n0,0,0,1\n0,0,1.5,1\n10,10,10,2\n")
+    result = run_compare("--scene", str(scene), "--quick", "--backends", "own.grid,own.sap", "--out",
+                         str(tmp_path / "run"))
+    assert result.returncode == 0, result.stderr[-2000:]
+    rows = pd.read_csv(tmp_path / "run" / "results.csv")
+    assert (rows.true_pairs == 1).all() and (rows.dim == 3).all()
+    assert main_cli(["--scene", str(scene), "--backends", "chipmunk.*", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "none of the backends chosen works in 3D" in err and len(err.splitlines()) == 1
+    assert main_cli(["--scene", str(scene), "--dim", "2", "--out", str(tmp_path / "o2")]) == 2
+    assert "--dim 2 but" in capsys.readouterr().err
+
+
+def test_list_for_spheres_marks_the_backends_that_work_in_2d_only(capsys):
+    assert main_cli(["--list", "--dim", "3"]) == 0
+    lines = {line.split()[0]: line for line in capsys.readouterr().out.splitlines() if line.strip()}
+    for name in registry.available():
+        assert ("2D ONLY" in lines[name]) == (3 not in registry.backend_class(name).dims), lines[name]
+    assert "2D ONLY" in lines["chipmunk.bbtree"] and "available" in lines["own.grid"]
+
+
 def test_user_scene_file_and_backend_patterns(tmp_path):
     scene = tmp_path / "mine.csv"
     scene.write_text("x,y,r\n0,0,1\n1.5,0,1\n10,10,2\n")
@@ -84,6 +125,8 @@ def test_user_scene_file_and_backend_patterns(tmp_path):
         (["--radius", "-3"], "radius must be finite and non-negative"),
         (["--frames", "0"], "--frames must be at least 1"),
         (["--scene", "/nonexistent/scene.csv"], "no such file"),
+        (["--dim", "4"], "invalid choice: 4"),
+        (["--dist", "pile", "--dim", "3"], "a 2D engine: it has no 3D scene yet"),
     ],
 )
 def test_bad_options_give_one_line_and_status_2(args, message, capsys, tmp_path):

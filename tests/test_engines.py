@@ -9,6 +9,7 @@ as a failing test here rather than passing unnoticed.
 
 from __future__ import annotations
 
+import itertools
 import os
 import re
 import resource
@@ -25,7 +26,7 @@ from engines.pairs import is_canonical, missing
 from own.reference import box_pairs, circle_pairs
 from scenes import generate
 from scenes.motion import simulate
-from strategies import BOUNDARY, any_scene
+from strategies import BOUNDARY, any_scene, sphere_scenes
 
 ENGINES = [n for n in engines.names() if n.split(".")[0] not in ("own", "essay")]
 
@@ -49,10 +50,16 @@ def exact_touching(positions, radii):
 FLOAT32 = np.finfo(np.float32)
 
 
+def as_points(positions) -> np.ndarray:
+    """Positions as an (n, d) float array: circles (d = 2, also for an empty list) or spheres."""
+    arr = np.asarray(positions, dtype=float)
+    return arr.reshape(-1, arr.shape[-1] if arr.ndim == 2 else 2)
+
+
 def float32_tight(positions, radii):
     """Some pair overlaps (box or circle) by less than float32 rounding at its coordinates can
     resolve, or a value is beyond float32's range: an engine that computes in float32 may lose it."""
-    positions, radii = np.asarray(positions, dtype=float).reshape(-1, 2), np.asarray(radii, dtype=float)
+    positions, radii = as_points(positions), np.asarray(radii, dtype=float)
     if len(radii) and max(np.abs(positions).max(), radii.max()) > FLOAT32.max / 4:
         return True
     pairs = box_pairs(positions, radii)
@@ -64,13 +71,13 @@ def float32_tight(positions, radii):
     scale = np.maximum(np.abs(positions[i]).max(axis=1), np.abs(positions[j]).max(axis=1)) + reach + 1e-30
     resolution = 16 * float(FLOAT32.eps) * scale
     box_slack = (reach - np.abs(d).max(axis=1))
-    circle_slack = reach - np.hypot(d[:, 0], d[:, 1])
+    circle_slack = reach - np.linalg.norm(d, axis=1)
     return bool((box_slack <= resolution).any() or ((circle_slack <= resolution) & (circle_slack > -resolution)).any())
 
 
 def touching_along_x(positions, radii):
     """Two boxes meet exactly along x (one's right edge is the other's left edge)."""
-    positions, radii = np.asarray(positions, dtype=float).reshape(-1, 2), np.asarray(radii, dtype=float)
+    positions, radii = as_points(positions), np.asarray(radii, dtype=float)
     pairs = box_pairs(positions, radii)
     if len(pairs) == 0:
         return False
@@ -125,7 +132,7 @@ def check_frame(backend, positions, radii):
 
 def within_limits(name, positions, radii):
     """Neither a known limitation nor input the engine refuses by its declared limits."""
-    positions, radii = np.asarray(positions, dtype=float).reshape(-1, 2), np.asarray(radii, dtype=float)
+    positions, radii = as_points(positions), np.asarray(radii, dtype=float)
     cls = engines.backend_class(name)
     if cls.limits.problem(positions, radii) or (hasattr(cls, "cells_problem") and cls.cells_problem(positions, radii)):
         return False
@@ -137,7 +144,7 @@ def check_scene(name, positions, radii):
     backend = make(name)
     try:
         backend.reset(positions, radii)
-        return check_frame(backend, np.asarray(positions, dtype=float).reshape(-1, 2), np.asarray(radii, dtype=float))
+        return check_frame(backend, as_points(positions), np.asarray(radii, dtype=float))
     finally:
         backend.close()
 
@@ -169,7 +176,7 @@ def test_engine_stays_correct_across_update_frames(name, dist):
 @pytest.mark.parametrize("case", list(BOUNDARY))
 def test_engine_on_the_hand_made_boundary_cases(name, case):
     positions, radii, _ = BOUNDARY[case]
-    positions, radii = np.asarray(positions, dtype=float).reshape(-1, 2), np.asarray(radii, dtype=float)
+    positions, radii = as_points(positions), np.asarray(radii, dtype=float)
     if not within_limits(name, positions, radii):
         pytest.skip(f"{name}: known limitation on this case (see the evidence tests)")
     check_scene(name, positions, radii)
@@ -183,6 +190,54 @@ def test_engine_reports_touching_boxes_or_circles(name):
     try:
         backend.reset([[0.0, 0.0], [2.0, 0.0], [10.0, 10.0]], [1.0, 1.0, 1.0])
         assert check_frame(backend, np.array([[0.0, 0.0], [2.0, 0.0], [10.0, 10.0]]), np.ones(3)).tolist() == [[0, 1]]
+    finally:
+        backend.close()
+
+
+# --- spheres: every 3D engine in three dimensions ----------------------------------------
+
+# The engines that are 2D (Chipmunk, Box2D); every other engine drives spheres natively.
+PLANAR_FAMILIES = {"chipmunk", "box2d"}
+SPHERE_ENGINES = [n for n in RELIABLE if n.split(".")[0] not in PLANAR_FAMILIES]
+
+
+@pytest.mark.parametrize("name", ENGINES)
+def test_every_3d_engine_takes_spheres_and_only_the_2d_ones_refuse_them(name):
+    cls = make(name).__class__
+    assert (3 in cls.dims) == (name.split(".")[0] not in PLANAR_FAMILIES), cls.dims
+
+
+@pytest.mark.parametrize("name", SPHERE_ENGINES)
+@settings(max_examples=25)
+@given(scene=sphere_scenes(max_n=80))
+def test_engine_never_misses_on_random_and_adversarial_sphere_scenes(name, scene):
+    positions, radii = scene
+    assume(within_limits(name, positions, radii))
+    check_scene(name, positions, radii)
+
+
+@pytest.mark.parametrize("name", SPHERE_ENGINES)
+@pytest.mark.parametrize("dist", ["uniform", "clusters"])
+def test_engine_stays_correct_across_update_frames_in_3d(name, dist):
+    traj = simulate(generate(dist, 300, seed=12, speed=3000.0, radii=(2.0, 30.0), dim=3), frames=10)
+    backend = make(name)
+    try:
+        backend.reset(traj.positions[0], traj.scene.radii)
+        for frame in traj.positions:
+            backend.update(frame)
+            check_frame(backend, frame, traj.scene.radii)
+    finally:
+        backend.close()
+
+
+@pytest.mark.parametrize("name", [n for n in SPHERE_ENGINES
+                                  if not {exact_touching, touching_along_x} & set(LIMITATIONS.get(n, []))])
+def test_engine_reports_spheres_touching_along_z(name):
+    positions = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 2.0], [10.0, 10.0, 10.0], [0.0, 0.0, 5.0]])
+    backend = make(name)
+    try:
+        backend.reset(positions, np.ones(4))
+        assert check_frame(backend, positions, np.ones(4)).tolist() == [[0, 1]]
     finally:
         backend.close()
 
@@ -300,9 +355,9 @@ def test_bullet_cannot_make_zero_radius_spheres(name):
 def test_engine_handles_empty_and_single_scenes(name):
     backend = make(name)
     try:
-        for n in (0, 1):
-            backend.reset(np.zeros((n, 2)) + 3.0, np.ones(n))
-            backend.update(np.zeros((n, 2)) + 4.0)
+        for n, dim in itertools.product((0, 1), backend.dims):
+            backend.reset(np.zeros((n, dim)) + 3.0, np.ones(n))
+            backend.update(np.zeros((n, dim)) + 4.0)
             assert backend.pairs().shape == (0, 2)
     finally:
         backend.close()

@@ -23,11 +23,13 @@ from test_own_exact import EXACT, IDS
 OWN_AND_ESSAY = [n for n in engines.names() if n.split(".")[0] in ("own", "essay")]
 
 
-def lifecycle_scene(n: int = 150, frames: int = 6, seed: int = 3, static_share: float = 0.3, spawn: bool = True):
+def lifecycle_scene(n: int = 150, frames: int = 6, seed: int = 3, static_share: float = 0.3, spawn: bool = True,
+                    dim: int = 2):
     """Objects on a random walk in a small box (many overlaps), a share of them static, a fifth
-    of them appearing or going between frames."""
+    of them appearing or going between frames (circles, or spheres where dim is 3)."""
     rng = np.random.default_rng(seed)
-    positions = rng.uniform(0, 200, (1, n, 2)) + np.cumsum(rng.normal(0, 3, (frames, n, 2)), axis=0)
+    side = 200.0 if dim == 2 else 60.0  # about as many overlaps in the cube as in the square
+    positions = rng.uniform(0, side, (1, n, dim)) + np.cumsum(rng.normal(0, 3, (frames, n, dim)), axis=0)
     static = rng.random(n) < static_share
     positions[:, static] = positions[0, static]
     alive = rng.random((frames, n)) < 0.8 if spawn else None
@@ -57,6 +59,20 @@ def run_through(backend, traj):
 @pytest.mark.parametrize("spawn", [False, True], ids=["statics", "statics and spawning"])
 def test_every_backend_takes_statics_and_spawning(name, spawn):
     traj = simulate(lifecycle_scene(spawn=spawn), 6)
+    backend = make(name)
+    try:
+        for f, got in run_through(backend, traj):
+            if backend.exact:
+                assert np.array_equal(np.sort(keys(got, traj.scene.n)), keys(traj.box_pairs[f], traj.scene.n))
+    finally:
+        backend.close()
+
+
+@pytest.mark.parametrize("name", [n for n in OWN_AND_ESSAY + RELIABLE
+                                  if n in engines.available() and 3 in engines.backend_class(n).dims])
+def test_every_3d_backend_takes_statics_and_spawning_of_spheres(name):
+    traj = simulate(lifecycle_scene(dim=3), 6)
+    assert len(traj.box_pairs[0]) > 50  # enough overlaps for the check to mean something
     backend = make(name)
     try:
         for f, got in run_through(backend, traj):

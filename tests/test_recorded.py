@@ -26,9 +26,10 @@ def own_cache(tmp_path_factory, monkeypatch):
     monkeypatch.setenv("BROADPHASE_CACHE", str(tmp_path_factory.getbasetemp() / "cache"))
 
 
-def spawning_file(tmp_path: Path, n: int = 40, frames: int = 5) -> tuple[Path, np.ndarray, np.ndarray]:
+def spawning_file(tmp_path: Path, n: int = 40, frames: int = 5, dim: int = 2) -> tuple[Path, np.ndarray, np.ndarray]:
     rng = np.random.default_rng(2)
-    positions = rng.uniform(0, 60, (1, n, 2)) + np.cumsum(rng.normal(0, 1, (frames, n, 2)), axis=0)
+    side = 60.0 if dim == 2 else 25.0
+    positions = rng.uniform(0, side, (1, n, dim)) + np.cumsum(rng.normal(0, 1, (frames, n, dim)), axis=0)
     alive = rng.random((frames, n)) < 0.7
     static = np.arange(n) < n // 4
     positions[:, static] = positions[0, static]
@@ -43,13 +44,16 @@ def long_csv(path: Path, scene_path: Path) -> Path:
     with np.load(scene_path) as data:
         pos, alive, static, radii = data["positions"], data["alive"], data["static"], data["radii"]
     f, k = np.nonzero(alive)
-    pd.DataFrame({"frame": f, "id": k * 10 + 7, "x": pos[f, k, 0], "y": pos[f, k, 1], "r": radii[k],
-                  "static": static[k].astype(int)}).to_csv(path, index=False)
+    columns = {"frame": f, "id": k * 10 + 7, "x": pos[f, k, 0], "y": pos[f, k, 1]}
+    if pos.shape[2] == 3:
+        columns["z"] = pos[f, k, 2]
+    pd.DataFrame({**columns, "r": radii[k], "static": static[k].astype(int)}).to_csv(path, index=False)
     return path
 
 
-def test_npz_and_csv_give_the_same_frames_and_pairs(tmp_path):
-    npz, alive, static = spawning_file(tmp_path)
+@pytest.mark.parametrize("dim", [2, 3])
+def test_npz_and_csv_give_the_same_frames_and_pairs(tmp_path, dim):
+    npz, alive, static = spawning_file(tmp_path, dim=dim)
     a = simulate(load_trajectory(npz), 10)
     b = simulate(load_trajectory(long_csv(tmp_path / "mine.csv", npz)), 10)
     assert a.frames == b.frames == 5  # a file has the frames it has
@@ -60,10 +64,13 @@ def test_npz_and_csv_give_the_same_frames_and_pairs(tmp_path):
         pairs = a.box_pairs[f]
         assert alive[f][pairs].all() and not (static[pairs[:, 0]] & static[pairs[:, 1]]).any()
     assert np.isfinite(a.positions).all()  # absent objects parked at their nearest alive position
+    assert a.scene.dim == b.scene.dim == dim and len(a.scene.box) == 2 * dim and a.positions.shape[2] == dim
+    assert sum(len(p) for p in a.box_pairs) > 10
 
 
-def test_a_trajectory_saved_is_read_back_the_same(tmp_path):
-    npz, _, _ = spawning_file(tmp_path)
+@pytest.mark.parametrize("dim", [2, 3])
+def test_a_trajectory_saved_is_read_back_the_same(tmp_path, dim):
+    npz, _, _ = spawning_file(tmp_path, dim=dim)
     scene = load_trajectory(npz)
     again = load_trajectory(save_trajectory(scene, tmp_path / "again.npz"))
     assert np.array_equal(again.motion.positions, scene.motion.positions)

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from scenes import DISTRIBUTIONS, ESSAY_BOX, Scene, generate
+from scenes import DISTRIBUTIONS, ESSAY_BOX, ESSAY_COVERAGE, Scene, generate
 from scenes.io import SceneFileError, load_scene, save_scene
 from scenes.motion import kinetic_energy, momentum, simulate
 from scenes.scene import check_positions
@@ -184,3 +184,73 @@ def test_positions_are_rejected_exactly_when_a_value_is_not_finite(rows):
         row = int(np.flatnonzero(~np.isfinite(positions).all(axis=1))[0])
         with pytest.raises(ValueError, match=f"row {row} is not finite"):
             check_positions(positions)
+
+
+# --- spheres -------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("dist", DISTRIBUTIONS)
+def test_sphere_scenes_keep_the_essays_coverage_of_the_volume(dist):
+    from scenes import coverage
+    from scenes.generate import at_essay_density
+
+    for n in (512, 4096):
+        scene = at_essay_density(dist, n, seed=2, dim=3)
+        assert scene.dim == 3 and scene.positions.shape == (n, 3) and len(scene.box) == 6
+        assert coverage(scene.radii, scene.box) == pytest.approx(ESSAY_COVERAGE)
+        low, high = np.array(scene.box[:3]), np.array(scene.box[3:])
+        assert ((scene.positions - 10.0 >= low) & (scene.positions + 10.0 <= high)).all()
+        speeds = np.linalg.norm(scene.velocities, axis=1)
+        np.testing.assert_allclose(speeds, 10.0)
+        assert np.abs(scene.velocities[:, 2]).mean() > 2.0  # directions fill the sphere, not the plane
+    # The gauss_ kinds spread less along their axis than along the others.
+    spread = at_essay_density("gauss_y", 4096, dim=3).positions.std(axis=0)
+    assert spread[1] < 0.5 * spread[0] and spread[1] < 0.5 * spread[2]
+
+
+@pytest.mark.parametrize(("dist", "digest"), [("uniform", "d7bebca85e79b7b7"), ("gauss_x", "3f17cefa9c579a75"),
+                                             ("gauss_y", "9efd830ba777fea3"), ("clusters", "1104590953c726de")])
+def test_circle_scenes_are_bit_for_bit_what_they_were_before_spheres(dist, digest):
+    import hashlib
+
+    scene = generate(dist, 300, seed=7, radii=(1.0, 9.0), speed=33.0)
+    assert scene.dim == 2 and scene.box == ESSAY_BOX
+    data = scene.positions.tobytes() + scene.velocities.tobytes() + scene.radii.tobytes()
+    assert hashlib.sha1(data).hexdigest()[:16] == digest
+
+
+def test_the_essays_motion_in_a_cube_keeps_energy_and_momentum_and_the_walls():
+    scene = generate("uniform", 400, radii=(4.0, 20.0), seed=5, speed=900.0, box=(0, 0, 0, 300, 300, 300), dim=3)
+    traj = simulate(scene, 60)
+    assert traj.positions.shape == (60, 400, 3)
+    assert sum(len(c) for c in traj.contacts) > 100  # they collide
+    r = scene.radii[:, None]
+    assert ((traj.positions >= r - 1e-9) & (traj.positions <= 300 - r + 1e-9)).all()
+    drift = traj.drift()
+    assert abs(drift["energy_drift"]) < 1e-9 and drift["momentum_drift"] < 0.5  # walls take momentum, not energy
+    free = simulate(scene.with_(walls=False), 30)
+    p0, p1 = momentum(free.velocities[0], scene.radii), momentum(free.velocities[-1], scene.radii)
+    np.testing.assert_allclose(p1, p0, atol=1e-6 * np.abs(p0).sum())
+    np.testing.assert_allclose(kinetic_energy(free.velocities[-1], scene.radii),
+                               kinetic_energy(free.velocities[0], scene.radii), rtol=1e-9)
+
+
+def test_a_sphere_scene_file_round_trips_and_takes_its_box(tmp_path):
+    scene = generate("gauss_x", 80, radii=(0.5, 9.0), seed=1, dim=3)
+    back = load_scene(save_scene(scene, tmp_path / "balls.csv"))
+    assert back.dim == 3 and back.box == scene.box
+    np.testing.assert_array_equal(back.positions, scene.positions)
+    np.testing.assert_array_equal(back.velocities, scene.velocities)
+    plain = tmp_path / "plain.csv"
+    plain.write_text("x,y,z,r\n0,0,0,1\n4,2,9,2\n")
+    loaded = load_scene(plain)
+    assert loaded.box == (-1.0, -1.0, -1.0, 6.0, 4.0, 11.0) and (loaded.velocities == 0).all()
+
+
+def test_a_sphere_scene_refuses_a_box_of_the_wrong_dimension():
+    with pytest.raises(ValueError, match=r"box must be 6 numbers \(xmin, ymin, zmin, xmax, ymax, zmax\)"):
+        Scene(np.zeros((2, 3)), np.ones(2), np.zeros((2, 3)), box=ESSAY_BOX)
+    with pytest.raises(ValueError, match=r"velocities must have shape \(n, 3\)"):
+        Scene(np.zeros((2, 3)), np.ones(2), np.zeros((2, 2)), box=(0, 0, 0, 1, 1, 1))
+    with pytest.raises(ValueError, match="dim must be 2"):
+        generate(dim=4)

@@ -101,13 +101,15 @@ def test_the_narrow_phase_keeps_the_spheres_that_touch(scene):
 
 
 SPHERE_BACKENDS = [name for name in engines.available() if 3 in engines.backend_class(name).dims]
+# Ours must be exact on spheres; the engines' own checks in 3D are in test_engines.py.
+OWN_SPHERE_BACKENDS = [name for name in SPHERE_BACKENDS if name.startswith("own.")]
 
 
 def test_our_grid_works_in_3d():
-    assert "own.grid" in SPHERE_BACKENDS
+    assert "own.grid" in OWN_SPHERE_BACKENDS
 
 
-@pytest.mark.parametrize("name", SPHERE_BACKENDS)
+@pytest.mark.parametrize("name", OWN_SPHERE_BACKENDS)
 @settings(max_examples=40)
 @given(scene=sphere_scenes(), steps=st.lists(st.sampled_from([0.0, 0.01, 0.3, 3.0, 40.0]), min_size=1, max_size=6),
        seed=st.integers(0, 2**16))
@@ -128,8 +130,8 @@ def test_sphere_backends_find_exactly_the_box_overlaps_across_stepped_frames(nam
         np.testing.assert_array_equal(np.sort(keys(got, n)), keys(brute_pairs(positions, radii), n))
 
 
-@pytest.mark.parametrize("name", SPHERE_BACKENDS)
-def test_sphere_backends_take_statics_and_spawning(name):
+@pytest.mark.parametrize("name", OWN_SPHERE_BACKENDS)
+def test_our_sphere_backends_take_statics_and_spawning_exactly(name):
     rng = np.random.default_rng(2)
     n = 300
     frames = [rng.uniform(0, 120, (n, 3)) for _ in range(4)]
@@ -176,3 +178,29 @@ def test_the_3d_grid_stays_small_on_a_line_of_spheres():
     start = grid._cubes.slots[0]
     assert len(start) <= 8 * n + 64 + 1
     assert len(grid.pairs()) == 0
+
+
+@pytest.mark.parametrize("per_cell", [0.0, 3.0])
+def test_the_3d_grid_split_over_every_core_finds_what_one_thread_does(per_cell):
+    from own.grid3d import Cubes
+    from own.parallel import chunk_count
+
+    rng = np.random.default_rng(6)
+    positions = rng.uniform(0, 150, (3000, 3))
+    positions[:500] = rng.normal(75, 4, (500, 3))  # a clump: chunks with many more pairs than others
+    radii = np.exp(rng.uniform(np.log(0.5), np.log(4.0), 3000))
+    expected = keys(brute_pairs(positions, radii), 3000)
+    parallel = engines.create("own.grid_parallel", parallel_from=0)
+    parallel.reset(positions, radii)
+    assert parallel.stats()["parallel"] == 1
+    for step in range(3):
+        moved = positions + step * rng.normal(0, 0.5, positions.shape)
+        parallel.update(moved)
+        parallel.validate()
+        got = parallel.pairs()
+        assert is_canonical(got, 3000) is None
+        np.testing.assert_array_equal(np.sort(keys(got, 3000)), keys(brute_pairs(moved, radii), 3000))
+    cubes = Cubes(radii, per_cell=per_cell, chunks=chunk_count())
+    cubes.update(positions)
+    cubes.validate()
+    np.testing.assert_array_equal(np.sort(keys(cubes.pairs(), 3000)), expected)

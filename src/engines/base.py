@@ -96,15 +96,25 @@ FLOAT32_BREAKS = ("It stores positions in float32: pairs that touch by less than
 FLOAT32_LIMITS = Limits(coordinate=1e38, radius=1e38, why="it computes in float32, whose range ends at 3.4e38")
 
 
+def in_3d(positions: np.ndarray, dtype=np.float64) -> np.ndarray:
+    """The centres as points (n, 3) for an engine that works in three dimensions: circles in the
+    plane z = 0, spheres as they are."""
+    points = np.zeros((len(positions), 3), dtype=dtype)
+    points[:, :positions.shape[1]] = positions
+    return points
+
+
 def hash_cells_problem(positions: np.ndarray, radii: np.ndarray, cell: float, most: int, dims: int = 2,
                        reach: float = math.inf) -> str | None:
     """What is wrong for a spatial hash of cells of size `cell` that walks every cell an object's
-    box covers (in `dims` dimensions, the third as deep as the object) and indexes cells with C
-    ints: an object over more than `most` cells, or a coordinate over `reach` cells from the origin."""
+    box covers (in `dims` dimensions: circles held in a 3D hash are as deep as they are wide) and
+    indexes cells with C ints: an object over more than `most` cells, or a coordinate over `reach`
+    cells from the origin."""
     if not len(radii):
         return None
     per_side = np.floor((positions + radii[:, None]) / cell) - np.floor((positions - radii[:, None]) / cell) + 1
-    cells = per_side.prod(axis=1) * (per_side.max(axis=1) if dims == 3 else 1)
+    flat_in_3d = dims == 3 and positions.shape[1] == 2
+    cells = per_side.prod(axis=1) * (per_side.max(axis=1) if flat_in_3d else 1)
     if cells.max() > most:
         k = int(cells.argmax())
         return (f"object {k} covers {cells[k]:.3g} cells of size {cell:.3g}, over the {most} this hash walks per "

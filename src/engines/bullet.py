@@ -1,7 +1,7 @@
 """Bullet (pybullet) broad phases: the dynamic AABB tree (btDbvtBroadphase) and brute force.
 
 pybullet exposes no pair list of its broad phase in bulk, only the narrow phase's contacts:
-circles become spheres in the z = 0 plane (mass 1, no gravity, never stepped), moved one by one
+circles become spheres in the z = 0 plane, spheres are themselves (mass 1, no gravity, never stepped), moved one by one
 with `resetBasePositionAndOrientation` (there is no batch setter), and `pairs()` runs
 `performCollisionDetection` and reads `getContactPoints`. Bullet keeps contacts up to its
 contact breaking threshold (0.02 units) apart, and its tree uses fattened boxes: such pairs
@@ -21,7 +21,7 @@ from .quiet import native_output_silenced
 with native_output_silenced():  # pybullet prints its build time from C on import
     import pybullet
 
-from .base import BroadPhase
+from .base import BroadPhase, in_3d
 from .pairs import canonical
 
 
@@ -29,6 +29,7 @@ class _Bullet(BroadPhase):
     exact = False
     reports = "contacts"
     lifecycle = "native"
+    dims = (2, 3)
     reset_flags = 0
     breaks = ("Bullet stops simulating a non-static object whose AABB extent has a squared length of 1e12 or more "
               "(btCollisionWorld::updateSingleAabb), i.e. spheres of radius ~5.8e5 and up; it cannot create spheres "
@@ -54,16 +55,17 @@ class _Bullet(BroadPhase):
         self._ids = np.full(self.n, -1, dtype=np.int64)  # each object's body, -1 while it is not alive
         self._index = np.full(2 * self.n + 16, -1, dtype=np.int64)  # body -> object
         alive = self.alive if self.alive is not None else np.ones(self.n, dtype=bool)
+        points = in_3d(positions).tolist()
         for k in np.flatnonzero(alive).tolist():
-            self._create(k, positions[k])
+            self._create(k, points[k])
         self._find_movers()
 
-    def _create(self, k: int, xy: np.ndarray) -> None:
+    def _create(self, k: int, xyz: list[float]) -> None:
         r = float(self.radii[k])
         if r not in self._shapes:
             self._shapes[r] = self._call(pybullet.createCollisionShape, pybullet.GEOM_SPHERE, radius=r)
         uid = self._call(pybullet.createMultiBody, baseMass=0.0 if self._static[k] else 1.0,
-                         baseCollisionShapeIndex=self._shapes[r], basePosition=[float(xy[0]), float(xy[1]), 0.0])
+                         baseCollisionShapeIndex=self._shapes[r], basePosition=xyz)
         if uid >= len(self._index):
             self._index = np.concatenate([self._index, np.full(uid + 1, -1, dtype=np.int64)])
         self._ids[k], self._index[uid] = uid, k
@@ -79,11 +81,11 @@ class _Bullet(BroadPhase):
                 self._call(pybullet.removeBody, int(self._ids[k]))
                 self._index[self._ids[k]], self._ids[k] = -1, -1
             for k in self.spawned.tolist():
-                self._create(k, positions[k])
+                self._create(k, in_3d(positions[k:k + 1])[0].tolist())
             self._find_movers()
         reset, client, still = pybullet.resetBasePositionAndOrientation, self._client, (0.0, 0.0, 0.0, 1.0)
-        for uid, (x, y) in zip(self._mover_ids, positions[self._movers].tolist()):
-            reset(uid, (x, y, 0.0), still, physicsClientId=client)
+        for uid, xyz in zip(self._mover_ids, in_3d(positions[self._movers]).tolist()):
+            reset(uid, xyz, still, physicsClientId=client)
 
     def _pairs(self):
         self._call(pybullet.performCollisionDetection)

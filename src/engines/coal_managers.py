@@ -3,7 +3,8 @@
 coal's binding cannot hand the broad phase's own pair list to Python (the collecting callback's
 list has no converter, and callback classes cannot be subclassed from Python), so pairs come
 from `CollisionCallBackDefault`: the managers' candidates after coal's narrow phase, collected
-in C++, mapped back through each sphere's geometry id. Circles are spheres in the plane z = 0;
+in C++, mapped back through each sphere's geometry id. Circles are spheres in the plane z = 0
+(spheres are themselves);
 `setTranslation` does not refresh an object's box, so `update` calls `computeAABB` too.
 """
 
@@ -12,7 +13,7 @@ from __future__ import annotations
 import coal
 import numpy as np
 
-from .base import BroadPhase, Limits, hash_cells_problem
+from .base import BroadPhase, Limits, hash_cells_problem, in_3d
 from .knobs import HASH_CELL_FACTORS, Knob, mean_diameter, sizes
 from .pairs import canonical
 
@@ -23,6 +24,7 @@ MAX_HASH_CELLS_PER_OBJECT = 1 << 17  # pairs() took 0.04 s for 59k cells, 2 s fo
 class _Coal(BroadPhase):
     exact = False
     reports = "contacts"
+    dims = (2, 3)
     manager = ""  # the coal class name
 
     def _manager(self, positions, radii):
@@ -31,9 +33,9 @@ class _Coal(BroadPhase):
     def _reset(self, positions, radii):
         self._geoms = [coal.Sphere(float(r)) for r in radii.tolist()]
         self._objects = []
-        for g, (x, y) in zip(self._geoms, positions.tolist()):
+        for g, xyz in zip(self._geoms, in_3d(positions)):
             tf = coal.Transform3s()
-            tf.setTranslation(np.array([x, y, 0.0]))
+            tf.setTranslation(xyz)
             self._objects.append(coal.CollisionObject(g, tf))
         ids = np.array([g.id() for g in self._geoms], dtype=np.uint64)
         self._id_order = np.argsort(ids)
@@ -44,8 +46,8 @@ class _Coal(BroadPhase):
         self._mgr.setup()
 
     def _update(self, positions):
-        for obj, (x, y) in zip(self._objects, positions.tolist()):
-            obj.setTranslation(np.array([x, y, 0.0]))
+        for obj, xyz in zip(self._objects, in_3d(positions)):
+            obj.setTranslation(xyz)
             obj.computeAABB()
         self._mgr.update()
 
@@ -135,12 +137,12 @@ class CoalHash(_Coal):
         cell = self.params["cell"] or (4.0 * float(radii.mean()) if len(radii) else 1.0)
         self._cell = float(cell) or 1.0
         self._check_cells(positions)
-        lo = (positions - radii[:, None]).min(axis=0) if len(radii) else np.zeros(2)
-        hi = (positions + radii[:, None]).max(axis=0) if len(radii) else np.ones(2)
-        r = float(radii.max()) if len(radii) else 1.0
-        return coal.SpatialHashingCollisionManager(
-            float(cell), np.array([lo[0], lo[1], -r]), np.array([hi[0], hi[1], r])
-        )
+        lo = (positions - radii[:, None]).min(axis=0) if len(radii) else np.zeros(self.dim)
+        hi = (positions + radii[:, None]).max(axis=0) if len(radii) else np.ones(self.dim)
+        if self.dim == 2:  # the plane z = 0, as deep as the largest circle
+            r = float(radii.max()) if len(radii) else 1.0
+            lo, hi = np.append(lo, -r), np.append(hi, r)
+        return coal.SpatialHashingCollisionManager(float(cell), lo, hi)
 
     def _check_cells(self, positions: np.ndarray) -> None:
         """coal's hash inserts an object into every cell its box covers, in three dimensions, and its

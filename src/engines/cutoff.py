@@ -20,7 +20,7 @@ import numpy as np
 from own.common import boxes
 from own.reference import box_pairs
 
-from .base import EMPTY_PAIRS, BroadPhase
+from .base import EMPTY_PAIRS, BroadPhase, in_3d
 
 # The cutoff asked for is 2 r_max widened by a millionth: freud, matscipy and vesin keep pairs
 # strictly closer than the cutoff, and two circles of radius r_max that touch are exactly 2 r_max
@@ -28,15 +28,8 @@ from .base import EMPTY_PAIRS, BroadPhase
 CUTOFF_PAD = 1.0 + 1e-6
 
 
-def in_3d(positions: np.ndarray, dtype=np.float64) -> np.ndarray:
-    """The centres as points (n, 3) in the plane z = 0: the libraries work in three dimensions."""
-    points = np.zeros((len(positions), 3), dtype=dtype)
-    points[:, :2] = positions
-    return points
-
-
 def image_free_side(positions: np.ndarray, cutoff: float) -> tuple[float, np.ndarray]:
-    """(side, origin) of a square periodic cell holding every centre with two cutoffs to spare on
+    """(side, origin) of a square (cubic, for spheres) periodic cell holding every centre with two cutoffs to spare on
     each side, so that no periodic image of a point lies within the cutoff of another."""
     lo, hi = positions.min(axis=0), positions.max(axis=0)
     side = float((hi - lo).max()) + 4.0 * cutoff
@@ -54,6 +47,7 @@ class CutoffSearch(BroadPhase):
     exact = False
     reports = "contacts"
     both_ways = False
+    dims = (2, 3)
 
     def _reset(self, positions, radii):
         self._cutoff = 2.0 * float(radii.max()) * CUTOFF_PAD if self.n else 0.0

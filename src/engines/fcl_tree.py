@@ -6,6 +6,11 @@ translation as a subnormal number (i * 5e-324): with any radius above ~1e-290, z
 exactly -r, so FCL's boxes are bit for bit those of the plane z = 0. Radii are floored at
 1e-300 for the same reason (a zero radius would make the z intervals disjoint); that can only
 add touching candidates, never remove one. The pairs are FCL's AABB overlaps (no narrow phase).
+
+Spheres use all three translations, so there the index goes into the rotation instead: two
+off-diagonal entries of a rotation matrix within 1e-12 of the identity (i mod 2^20 and i // 2^20,
+in steps of 2^-60). FCL takes such a matrix as the identity (Eigen's isIdentity, to 1e-12) and
+boxes the sphere exactly as unrotated, so its boxes are again bit for bit the spheres' own.
 """
 
 from __future__ import annotations
@@ -18,12 +23,27 @@ from .pairs import canonical
 
 TINY_RADIUS = 1e-300
 INDEX_STEP = 5e-324  # the smallest subnormal double
+# Spheres: the index in a rotation FCL takes as the identity (entries within 1e-12 of it).
+ROTATION_STEP, ROTATION_SPAN = 2.0**-60, 1 << 20  # (2^20 - 1) * 2^-60 = 9.1e-13
 
 
 def _collect(o1, o2, found: list) -> bool:
     found.append(o1.getTranslation()[2])
     found.append(o2.getTranslation()[2])
     return False  # keep going
+
+
+def _collect_rotated(o1, o2, found: list) -> bool:
+    a, b = o1.getRotation(), o2.getRotation()
+    found.append((a[2, 1], a[0, 2]))
+    found.append((b[2, 1], b[0, 2]))
+    return False
+
+
+def tagging_rotation(i: int) -> np.ndarray:
+    """A rotation matrix within 1e-12 of the identity whose entries [2, 1] and [0, 2] name i."""
+    low, high = (i % ROTATION_SPAN) * ROTATION_STEP, (i // ROTATION_SPAN) * ROTATION_STEP
+    return np.array([[1.0, 0.0, high], [0.0, 1.0, -low], [-high, low, 1.0]])
 
 
 class FclTree(BroadPhase):
@@ -36,23 +56,38 @@ class FclTree(BroadPhase):
     method = "tree"
     exact = False
     reports = "boxes"
+    dims = (2, 3)
 
     def _reset(self, positions, radii):
-        self._objects = [
-            fcl.CollisionObject(fcl.Sphere(max(r, TINY_RADIUS)), fcl.Transform(np.array([x, y, i * INDEX_STEP])))
-            for i, ((x, y), r) in enumerate(zip(positions.tolist(), radii.tolist()))
-        ]
+        if self.dim == 3:
+            self._objects = [fcl.CollisionObject(fcl.Sphere(max(r, TINY_RADIUS)), fcl.Transform(tagging_rotation(i), xyz))
+                             for i, (xyz, r) in enumerate(zip(positions, radii.tolist()))]
+        else:
+            self._objects = [
+                fcl.CollisionObject(fcl.Sphere(max(r, TINY_RADIUS)), fcl.Transform(np.array([x, y, i * INDEX_STEP])))
+                for i, ((x, y), r) in enumerate(zip(positions.tolist(), radii.tolist()))
+            ]
         self._manager = fcl.DynamicAABBTreeCollisionManager()
         self._manager.registerObjects(self._objects)
         self._manager.setup()
 
     def _update(self, positions):
-        for i, (obj, (x, y)) in enumerate(zip(self._objects, positions.tolist())):
-            obj.setTranslation(np.array((x, y, i * INDEX_STEP)))
+        if self.dim == 3:
+            for obj, xyz in zip(self._objects, positions):
+                obj.setTranslation(xyz)
+        else:
+            for i, (obj, (x, y)) in enumerate(zip(self._objects, positions.tolist())):
+                obj.setTranslation(np.array((x, y, i * INDEX_STEP)))
         self._manager.update()
 
     def _pairs(self):
-        found: list[float] = []
-        self._manager.collide(found, _collect)
-        index = np.rint(np.asarray(found, dtype=np.float64) / INDEX_STEP).astype(np.int64)
+        if self.dim == 3:
+            tags: list[tuple[float, float]] = []
+            self._manager.collide(tags, _collect_rotated)
+            parts = np.rint(np.asarray(tags, dtype=np.float64).reshape(-1, 2) / ROTATION_STEP).astype(np.int64)
+            index = parts[:, 0] + parts[:, 1] * ROTATION_SPAN
+        else:
+            found: list[float] = []
+            self._manager.collide(found, _collect)
+            index = np.rint(np.asarray(found, dtype=np.float64) / INDEX_STEP).astype(np.int64)
         return canonical(index[0::2], index[1::2])

@@ -2,7 +2,7 @@
 list `LinkCell` (cells one cutoff wide).
 
 freud answers pair queries only in a periodic box ("Pair queries in a non-periodic box are not
-implemented"), so the box is a 2D periodic square holding every centre with two cutoffs to spare
+implemented"), so the box is a periodic square (a cube, for spheres) holding every centre with two cutoffs to spare
 on each side: no image of a point comes within the cutoff of another. The points go in as float32
 (freud's precision), shifted into the box (centred on the origin); the structure is built per
 frame (`update`) and queried with a ball of the cutoff, each pair found both ways (`pairs`), on
@@ -37,7 +37,7 @@ class _FreudQuery(CutoffSearch):
     def _build(self, positions):
         self._check_cells(positions)
         side, origin = image_free_side(positions, self._cutoff)
-        box = freud.box.Box(side, side, is2D=True)
+        box = freud.box.Box(side, side, is2D=True) if self.dim == 2 else freud.box.Box.cube(side)
         self._points = in_3d(positions - origin - side / 2.0, np.float32)  # the box spans [-side/2, side/2)
         with freud.parallel.NumThreads(ONE_THREAD):
             self._structure = self._make(box, self._points)
@@ -85,7 +85,7 @@ class FreudLinkCell(_FreudQuery):
             return None
         cutoff = 2.0 * float(radii.max()) * CUTOFF_PAD
         side, _ = image_free_side(positions, cutoff)
-        cells = (side / cutoff) ** 2
+        cells = (side / cutoff) ** positions.shape[1]
         if cells > MAX_LINKCELL_CELLS:
             return (f"{cells:.3g} cells of width {cutoff:.3g} (the largest diameter) over a box of {side:.3g}, over "
                     f"its limit of {MAX_LINKCELL_CELLS} (about 23 bytes a cell)")

@@ -1,7 +1,7 @@
 """matscipy's neighbour list (`matscipy.neighbours.neighbour_list`), a cell list in C.
 
-Called non-periodic (`pbc` false on every axis) with a cell spanning the points (four cutoffs in
-z), in float64. One call per frame builds its cells and lists every pair both ways (`pairs`);
+Called non-periodic (`pbc` false on every axis) with a cell spanning the points (for circles,
+four cutoffs in z), in float64. One call per frame builds its cells and lists every pair both ways (`pairs`);
 there is no separate build.
 """
 
@@ -20,8 +20,8 @@ class MatscipyCells(CutoffSearch):
     def _query(self):
         lo = self._positions.min(axis=0)
         extent = self._positions.max(axis=0) - lo
-        cell = np.diag([max(extent[0], self._cutoff) * (1 + 1e-9), max(extent[1], self._cutoff) * (1 + 1e-9),
-                        4.0 * self._cutoff])
+        sides = np.maximum(extent, self._cutoff) * (1 + 1e-9)
+        cell = np.diag([sides[0], sides[1], sides[2] if self.dim == 3 else 4.0 * self._cutoff])
         points = in_3d(self._positions - lo)
         i, j = neighbour_list("ij", positions=points, cutoff=self._cutoff, cell=cell, pbc=[False, False, False])
         return i, j

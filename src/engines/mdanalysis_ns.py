@@ -6,7 +6,7 @@ is under 3% of the smallest extent, which for points in a plane is 0 (z), so it 
 this same grid (behind a box of its own making, which refuses a cutoff over the points' extent).
 
 FastNS is called non-periodic (`pbc=False`): it still needs a box, which sets its grid: the
-points' extent plus four cutoffs in x and y, eight in z (it refuses a cutoff over half the
+points' extent plus four cutoffs on each axis (circles: eight cutoffs in z; it refuses a cutoff over half the
 box on any axis). A box of the extent alone loses pairs at its edges (measured: 8 of 622 contacts
 on the essay's scene at n = 2048; none with the margin). The points go in as float32 (its
 precision), measured from their lowest corner so that a scene far from the origin keeps what
@@ -38,7 +38,8 @@ class MdaFastNS(CutoffSearch):
         points = in_3d(positions - lo, np.float32)
         extent = positions.max(axis=0) - lo
         side = extent + 4.0 * self._cutoff  # and twice what FastNS requires, against float32 rounding
-        box = np.array([side[0], side[1], 8.0 * self._cutoff, 90.0, 90.0, 90.0], dtype=np.float32)
+        height = side[2] if self.dim == 3 else 8.0 * self._cutoff
+        box = np.array([side[0], side[1], height, 90.0, 90.0, 90.0], dtype=np.float32)
         with warnings.catch_warnings():  # "pbc is False: coordinates shifted": what this call asks for
             warnings.simplefilter("ignore")
             self._grid = FastNS(self._cutoff, points, box, pbc=False)

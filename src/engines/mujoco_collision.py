@@ -1,7 +1,7 @@
 """MuJoCo's collision pipeline: its sweep-and-prune broad phase and sphere contacts.
 
-The model is built with `MjSpec`: one body per circle with a free joint and a sphere geom at
-z = 0 (mocap bodies would be welded to the world, whose pairs MuJoCo filters out), gravity 0.
+The model is built with `MjSpec`: one body per object with a free joint and a sphere geom (at
+z = 0 for circles; mocap bodies would be welded to the world, whose pairs MuJoCo filters out), gravity 0.
 Per frame the positions go into `qpos` as one array write, `mj_kinematics` places the geoms and
 `mj_collision` runs the broad phase and the narrow phase; the pairs are the contacts'
 geoms (`d.contact.geom[:ncon]`), read as one array: "contacts". MuJoCo times its own broad phase
@@ -30,7 +30,7 @@ import warnings
 import mujoco
 import numpy as np
 
-from .base import EMPTY_PAIRS, BroadPhase, Limits
+from .base import EMPTY_PAIRS, BroadPhase, Limits, in_3d
 
 MAX_BODIES = 65533  # mjModel counts bodies (the world included) in 16 bits, less a few reserved ids
 ARENA_BYTES_PER_BODY_PAIR = 4.1  # the broad phase's scratch, in bytes per n^2 (measured, above)
@@ -54,6 +54,7 @@ class MujocoSap(BroadPhase):
     exact = False
     reports = "contacts"
     lifecycle = "native"
+    dims = (2, 3)
     breaks = ("MuJoCo's sweep and prune runs along the principal axis of all the geoms: spheres that touch exactly "
               "can be lost to rounding there (a pair found alone, missed among 30 others).")
     limits = Limits(zero_radius=False, objects=MAX_BODIES,
@@ -74,14 +75,14 @@ class MujocoSap(BroadPhase):
         spec.memory = arena
         static = self.static if self.static is not None else np.zeros(n, dtype=bool)
         self._movers = np.flatnonzero(~static)
+        points = in_3d(self._positions).tolist()
         for k in np.flatnonzero(static).tolist():
-            x, y = self._positions[k].tolist()
             spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[float(self._radii[k]), 0.0, 0.0],
-                                    pos=[x, y, 0.0])
-        for (x, y), r in zip(self._positions[self._movers].tolist(), self._radii[self._movers].tolist()):
+                                    pos=points[k])
+        for k, r in zip(self._movers.tolist(), self._radii[self._movers].tolist()):
             # Mass and inertia given, not derived from the sphere: a tiny sphere would be too light
             # for MuJoCo ("mass and inertia of moving bodies must be larger than mjMINVAL").
-            body = spec.worldbody.add_body(pos=[x, y, 0.0], mass=1.0, inertia=[1.0, 1.0, 1.0], explicitinertial=True)
+            body = spec.worldbody.add_body(pos=points[k], mass=1.0, inertia=[1.0, 1.0, 1.0], explicitinertial=True)
             body.add_freejoint()
             body.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[r, 0.0, 0.0])
         self._contact_room = contact_room
@@ -115,7 +116,7 @@ class MujocoSap(BroadPhase):
         self._positions = positions
         if len(self.spawned) or len(self.removed):
             self._switch(self.alive)
-        self._qpos[:, 0:2] = positions[self._movers]
+        self._qpos[:, 0:self.dim] = positions[self._movers]
         mujoco.mj_kinematics(self._model, self._data)
 
     def _pairs(self):

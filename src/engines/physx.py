@@ -1,7 +1,7 @@
 """NVIDIA PhysX 5 broad phases through ovphysx (CPU mode): sweep and prune, multi-box pruning, and
 the GPU broad phase, which PhysX runs as its parallel automatic box pruning (PABP) on the CPU.
 
-ovphysx simulates a USD stage: the circles become `Sphere` prims in the plane z = 0, each a
+ovphysx simulates a USD stage: the objects become `Sphere` prims (circles in the plane z = 0), each a
 rigid body with a collider and a contact report, in a `PhysicsScene` whose
 `physxScene:broadphaseType` selects the broad phase ("SAP", "MBP" or "GPU"), gravity 0, sleeping
 off. The stage is written as a .usda file, populated through ovstage and attached once. Per
@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .base import EMPTY_PAIRS, FLOAT32_BREAKS, BroadPhase, Limits
+from .base import EMPTY_PAIRS, FLOAT32_BREAKS, BroadPhase, Limits, in_3d
 from .quiet import native_output_silenced
 from .pairs import canonical
 
@@ -78,21 +78,21 @@ def scene_usda(positions: np.ndarray, radii: np.ndarray, broadphase: str, static
              "        bool physxScene:enableGPUDynamics = false", "    }"]
     body = ('    def Sphere "s{i}" (\n        prepend apiSchemas = ["PhysicsRigidBodyAPI", "PhysicsCollisionAPI", '
             '"PhysxContactReportAPI", "PhysxRigidBodyAPI"]\n    )\n    {{\n        double radius = {r!r}\n'
-            '        double3 xformOp:translate = ({x!r}, {y!r}, 0)\n        uniform token[] xformOpOrder = '
+            '        double3 xformOp:translate = ({x!r}, {y!r}, {z!r})\n        uniform token[] xformOpOrder = '
             '["xformOp:translate"]\n        float physxContactReport:threshold = 0\n'
             '        float physxRigidBody:sleepThreshold = 0\n{off}    }}')
     # A static object is a collider without a rigid body: PhysX puts it in its static pruner and
     # never pairs two of them.
     # An object that is not alive has its collision off (see _PhysX._enable).
     fixed = ('    def Sphere "f{i}" (\n        prepend apiSchemas = ["PhysicsCollisionAPI"]\n    )\n    {{\n'
-             '        double radius = {r!r}\n        double3 xformOp:translate = ({x!r}, {y!r}, 0)\n'
+             '        double radius = {r!r}\n        double3 xformOp:translate = ({x!r}, {y!r}, {z!r})\n'
              '        uniform token[] xformOpOrder = ["xformOp:translate"]\n{off}    }}')
     off = "        bool physics:collisionEnabled = 0\n"
     static = np.zeros(len(radii), dtype=bool) if static is None else static
     alive = np.ones(len(radii), dtype=bool) if alive is None else alive
-    lines += [(fixed if still else body).format(i=i, r=r, x=x, y=y, off="" if on else off)
-              for i, ((x, y), r, still, on) in enumerate(zip(positions.tolist(), radii.tolist(), static.tolist(),
-                                                             alive.tolist()))]
+    lines += [(fixed if still else body).format(i=i, r=r, x=x, y=y, z=z, off="" if on else off)
+              for i, ((x, y, z), r, still, on) in enumerate(zip(in_3d(positions).tolist(), radii.tolist(),
+                                                                static.tolist(), alive.tolist()))]
     return "\n".join(lines + ["}"]) + "\n"
 
 
@@ -116,6 +116,7 @@ class _PhysX(BroadPhase):
     exact = False
     reports = "contacts"
     lifecycle = "native"
+    dims = (2, 3)
     breaks = FLOAT32_BREAKS
     # A sphere of radius 0 is an invalid shape to PhysX: it leaves the object out, and its pairs are lost.
     # At its default density a sphere's inverse inertia, 1 / (1.7e3 r^5), overflows float32 below
@@ -200,7 +201,7 @@ class _PhysX(BroadPhase):
             self._enable(self.spawned, True)
             self._enable(self.removed, False)
             self._physx.wait_task(self._physx.update_from_ovstage(first, self._ordinal))
-        self._xyz[:, :2] = positions
+        self._xyz[:, :self.dim] = positions
         self._write_positions()
 
     def _enable(self, objects: np.ndarray, on: bool) -> None:

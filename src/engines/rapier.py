@@ -1,7 +1,7 @@
 """Rapier (the `rapier3d` bindings): its BVH broad phase, run by a collision pipeline on colliders
 without bodies.
 
-Each circle is a ball collider at z = 0 that collides with every other kind
+Each object is a ball collider (circles at z = 0) that collides with every other kind
 (`ActiveCollisionTypes.all()`: colliders without bodies are fixed, and fixed pairs are skipped by
 default). Per frame each collider's translation is set through the binding (there is no batch
 setter), then `CollisionPipeline.step` updates the BVH and the pair set; `contact_pairs()` is every
@@ -20,7 +20,7 @@ import rapier3d
 
 from scenes.scene import shown
 
-from .base import EMPTY_PAIRS, FLOAT32_BREAKS, FLOAT32_LIMITS, BroadPhase
+from .base import EMPTY_PAIRS, FLOAT32_BREAKS, FLOAT32_LIMITS, BroadPhase, in_3d
 from .knobs import Knob, fixed
 
 
@@ -34,6 +34,7 @@ class RapierBvh(BroadPhase):
     reports = "boxes"
     defaults = {"prediction": 0.002}
     lifecycle = "native"
+    dims = (2, 3)
     sweeps = (Knob("prediction", fixed([1e-4, 0.002, 0.02, 0.2, 2.0]), "prediction distance"),)
 
     def _reset(self, positions, radii):
@@ -45,17 +46,18 @@ class RapierBvh(BroadPhase):
         self._handles: list = [None] * self.n  # each object's collider while it is alive
         self._object_of = np.full(self.n + 16, -1, dtype=np.int64)  # collider slot -> object (slots are reused)
         alive = self.alive if self.alive is not None else np.ones(self.n, dtype=bool)
+        points = in_3d(positions).tolist()
         for k in np.flatnonzero(alive).tolist():
-            self._insert(k, positions[k])
+            self._insert(k, points[k])
         self._find_movers()
         self._bodies, self._islands = rapier3d.RigidBodySet(), rapier3d.IslandManager()
         self._broad, self._narrow = rapier3d.BroadPhaseBvh(), rapier3d.NarrowPhase()
         self._pipeline = rapier3d.CollisionPipeline()
 
-    def _insert(self, k: int, xy: np.ndarray) -> None:
+    def _insert(self, k: int, xyz: list[float]) -> None:
         kinds = rapier3d.ActiveCollisionTypes.default_types() if self._static[k] else rapier3d.ActiveCollisionTypes.all()
         handle = self._colliders.insert(rapier3d.Collider.ball(float(self.radii[k]))
-                                        .translation([float(xy[0]), float(xy[1]), 0.0]).active_collision_types(kinds)
+                                        .translation(xyz).active_collision_types(kinds)
                                         .build())
         if handle.index >= len(self._object_of):
             self._object_of = np.concatenate([self._object_of, np.full(handle.index + 1, -1, dtype=np.int64)])
@@ -73,11 +75,11 @@ class RapierBvh(BroadPhase):
                 self._colliders.remove(self._handles[k], self._islands, self._bodies, False)
                 self._object_of[self._handles[k].index], self._handles[k] = -1, None
             for k in self.spawned.tolist():
-                self._insert(k, positions[k])
+                self._insert(k, in_3d(positions[k:k + 1])[0].tolist())
             self._find_movers()
         colliders = self._colliders
-        for handle, (x, y) in zip(self._mover_handles, positions[self._movers].tolist()):
-            colliders[handle].translation = [x, y, 0.0]
+        for handle, xyz in zip(self._mover_handles, in_3d(positions[self._movers]).tolist()):
+            colliders[handle].translation = xyz
 
     def _pairs(self):
         self._pipeline.step(float(self.params["prediction"]), self._islands, self._broad, self._narrow, self._bodies,

@@ -19,6 +19,7 @@ class KDTree(BroadPhase):
     # point overflow" from inside query_pairs.
     limits = Limits(coordinate=8e307, radius=8e307, why="scipy's k-d tree overflows on distances beyond 1.8e308")
     method = "kdtree"
+    dims = (2, 3)
     exact = False  # exact after the filter, unless query_pairs' own rounding drops a touching pair
     reports = "boxes"
 

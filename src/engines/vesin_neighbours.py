@@ -4,8 +4,8 @@ vesin crashes the process (SIGFPE) when called non-periodic on points in one pla
 extent spans more than about 316 cutoffs (measured: (extent / cutoff)^2 > 1e5, whatever n: it
 caps its cell count near 1e5 and scales each axis's cells down, which leaves the flat axis none).
 So it is called periodic, with a box holding every centre with two cutoffs to spare on each side
-(no image comes within the cutoff) and tall enough in z that the cap never takes the last cell
-there (at least sqrt(cells in the plane / 1e5) cells). One call per frame, in float64, each pair
+(no image comes within the cutoff) and, for circles, tall enough in z that the cap never takes the
+last cell there (at least sqrt(cells in the plane / 1e5) cells); spheres get a cube. One call per frame, in float64, each pair
 once (`pairs`); there is no separate build.
 """
 
@@ -38,6 +38,6 @@ class VesinCells(CutoffSearch):
         if self._list is None:
             self._list = vesin.NeighborList(cutoff=self._cutoff, full_list=False)
         side, origin = image_free_side(self._positions, self._cutoff)
-        box = np.diag([side, side, z_height(side, self._cutoff)])
+        box = np.diag([side, side, z_height(side, self._cutoff) if self.dim == 2 else side])
         i, j = self._list.compute(points=in_3d(self._positions - origin), box=box, periodic=True, quantities="ij")
         return i, j

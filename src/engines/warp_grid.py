@@ -20,7 +20,7 @@ from .base import EMPTY_PAIRS, FLOAT32_BREAKS, BroadPhase
 from .quiet import native_output_silenced
 
 wp.config.log_level = wp.LOG_WARNING  # not its module-load timings on every first launch
-GRID_DIM = 128  # hash grid dimensions (cells are hashed into GRID_DIM^2 buckets)
+GRID_DIM = 128  # hash grid dimensions (cells are hashed into GRID_DIM^2 buckets, GRID_DIM^3 for spheres)
 
 
 @wp.kernel
@@ -36,7 +36,8 @@ def _box_pairs(grid: wp.uint64, points: wp.array(dtype=wp.vec3), radii: wp.array
         if j > i:
             q = points[j]
             reach = r + radii[j]
-            if wp.abs(q[0] - p[0]) <= reach and wp.abs(q[1] - p[1]) <= reach:
+            # Circles are at z = 0, where the third test always passes.
+            if wp.abs(q[0] - p[0]) <= reach and wp.abs(q[1] - p[1]) <= reach and wp.abs(q[2] - p[2]) <= reach:
                 k = wp.atomic_add(count, 0, 1)
                 if k < out.shape[0]:
                     out[k, 0] = wp.int64(i)
@@ -56,10 +57,11 @@ class WarpHashGrid(BroadPhase):
     breaks = FLOAT32_BREAKS
     exact = False
     reports = "boxes"
+    dims = (2, 3)
 
     def _reset(self, positions, radii):
         self._device = device()
-        self._grid = wp.HashGrid(GRID_DIM, GRID_DIM, 1, device=self._device)
+        self._grid = wp.HashGrid(GRID_DIM, GRID_DIM, 1 if self.dim == 2 else GRID_DIM, device=self._device)
         self._largest = float(radii.max()) if self.n else 0.0
         self._cell = max(2.0 * self._largest, 1e-6)
         self._xyz = np.zeros((self.n, 3), np.float32)
@@ -70,7 +72,7 @@ class WarpHashGrid(BroadPhase):
         self._update(positions)
 
     def _update(self, positions):
-        self._xyz[:, :2] = positions
+        self._xyz[:, :self.dim] = positions
         self._points.assign(self._xyz)
 
     def _pairs(self):

@@ -32,7 +32,7 @@ from scenes.scene import shown
 
 from .common import PairCollector, centre_extents, emit, one_radius, radius_of
 from .compress import NATIVE, SLACK_ROWS, scan_compressed
-from .grid3d import Cubes
+from .grid3d import CubesForSpheres
 from .small import SmallScenes
 
 # The grid has at most this many cells per object (cells are enlarged to fit), so tiny radii in a
@@ -514,8 +514,8 @@ class CellLayout(SmallScenes, BroadPhase):
         return {"cells": np.column_stack([ox + cx * cw, oy + cy * ch, ox + (cx + 1) * cw, oy + (cy + 1) * ch])}
 
 
-class UniformGrid(CellLayout):
-    """Uniform grid of square cells over the centres, half-stencil pair search.
+class SquareGrid(CellLayout):
+    """own.grid over circles: a uniform grid of square cells over the centres, half-stencil pair search.
 
     `p` and `cell` as in CellLayout. Objects wider than a cell are handled separately at a cost
     that grows with their area. `coherent` keeps the objects in last frame's cell order (False
@@ -530,15 +530,10 @@ class UniformGrid(CellLayout):
     Statics go into a grid of their own, built once (anew only when a static appears or goes), and
     are absent from this one: they are never sorted again or tested against each other, and each
     frame every mover is tested against the static cells around it (`against_statics`).
-
-    Spheres (positions (n, 3)): cubes as wide as the largest sphere, the objects counted into them
-    every frame, the half-stencil search in 3D (own/grid3d.py); statics and spawning there take the
-    interface's generic way, and `p` and `cell` are not taken.
     """
 
     name = "own.grid"
     lifecycle = "native"
-    dims = (2, 3)
     defaults = {"p": None, "cell": None, "coherent": True, "specialise": True, "vector": None}
 
     def __init__(self, **params):
@@ -553,20 +548,8 @@ class UniformGrid(CellLayout):
         # small for a frame's pairs, so the pair search ran twice (rain, rebuilt every frame).
         self._collect = PairCollector()
         self._statics: StaticCells | None = None
-        self._cubes: Cubes | None = None
-
-    def _native_lifecycle(self) -> bool:
-        return self.dim == 2  # spheres: statics and spawning the interface's generic way (Cubes)
 
     def _reset(self, positions, radii):
-        self._cubes = None
-        if self.dim == 3:
-            if self.params["p"] is not None or self.params["cell"] is not None:
-                raise ValueError(f"{self.name}: p and cell are not taken over spheres yet (cells are as wide as the "
-                                 "largest sphere)")
-            self._cubes = Cubes(radii)
-            self._cubes.update(positions)
-            return
         self._start_layout(radii)
         n = self.n
         # Slot arrays (ids, centres, keys, radii), double-buffered: the build reads last frame's
@@ -593,9 +576,6 @@ class UniformGrid(CellLayout):
         self._update(positions)
 
     def _update(self, positions):
-        if self._cubes is not None:
-            self._cubes.update(positions)
-            return
         self._positions = positions
         ids, centres, key, sradii = self._slots
         if len(self.spawned) or len(self.removed):
@@ -646,8 +626,6 @@ class UniformGrid(CellLayout):
         return int(key_space(self._layout)[-1])
 
     def _pairs(self):
-        if self._cubes is not None:
-            return self._cubes.pairs()
         ids, centres, key, sradii = self._slots
         radius = sradii if self._one is None else self._one
         out, (tests,) = self._collect(grid_pairs, ids, centres, sradii, radius, key, self._start, self._layout,
@@ -659,12 +637,7 @@ class UniformGrid(CellLayout):
             out = np.concatenate([out, cross])
         return out
 
-    def structure(self):
-        return {} if self._cubes is not None else super().structure()
-
     def stats(self):
-        if self._cubes is not None:
-            return self._cubes.stats()
         if not self._counters:  # nothing built yet
             return {}
         return {"cells": int(self._layout[NX] * self._layout[NY]), "cell": float(self._layout[CW]),
@@ -676,9 +649,6 @@ class UniformGrid(CellLayout):
                 **self._counters, **self._left_out}
 
     def validate(self):
-        if self._cubes is not None:
-            self._cubes.validate()
-            return
         nx, ny = int(self._layout[NX]), int(self._layout[NY])
         large = self._large_key()
         start, (ids, _, key, sradii) = self._start, self._slots
@@ -698,6 +668,16 @@ class UniformGrid(CellLayout):
             x, y = self._positions[ids[s]]
             cx, cy = cell_of(x, ox, 1.0 / cw, nx - 1.0), cell_of(y, oy, 1.0 / ch, ny - 1.0)
             assert key[s] == cy * (nx + 2) + cx + 1, f"object {ids[s]} is not in the cell holding its centre"
+
+
+class UniformGrid(CubesForSpheres, SquareGrid):
+    """Uniform grid of square cells over the centres, half-stencil pair search; over spheres, cubes.
+
+    Circles: see SquareGrid (`p`, `cell`, `coherent`, `specialise`, `vector`; statics and spawning
+    natively). Spheres (positions (n, 3)): cubes as wide as the largest sphere, the objects
+    counted into them every frame, the half-stencil search in 3D (own/grid3d.py); statics and
+    spawning there take the interface's generic way, and `p` and `cell` are not taken.
+    """
 
 
 class StaticCells:

@@ -12,7 +12,10 @@ lists, and a rebuild (own.grid_incremental's, then dealt to the chunks) when one
 objects are found afresh, serially, as in own.grid_incremental.
 
 Measured at the essay's density (python -m studies.bench, 2 cores): 0.87 against 1.26 ms a frame
-on one thread at n = 131072, 9.6 against 19.5 ms at 2^20; it loses below about 16384 objects."""
+on one thread at n = 131072, 9.6 against 19.5 ms at 2^20; it loses below about 16384 objects.
+
+Over spheres it is own.grid's cubes (own/grid3d.py) with the pair search split into chunks of
+slots searched in parallel, each into its own rows; the counting sort stays on one thread."""
 
 from __future__ import annotations
 
@@ -21,6 +24,7 @@ import numpy as np
 
 from .common import PairCollector, radius_of
 from .grid import cell_key, grid_layout, key_space, small_limit
+from .grid3d import CubesForSpheres
 from .grid_incremental import (LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT,
                                IncrementalGrid, _boxes_overlap, add_neighbours, drop_moved, first_large_rank,
                                head_length, incremental_rebuild, large_pairs, move, unpack)
@@ -191,10 +195,10 @@ def large_only(state, head, layout, limit, tests, buf):
     return large_pairs(state, head, layout, limit, buf, 0, tests)
 
 
-class ParallelIncrementalGrid(IncrementalGrid):
-    """own.grid_incremental with each frame split over every core (see the module's docstring),
-    from `parallel_from` objects on; below that, one thread exactly as own.grid_incremental. Its
-    figures use every core: compare them with that in mind."""
+class ParallelSquares(IncrementalGrid):
+    """own.grid_parallel over circles: own.grid_incremental with each frame split over every core
+    (see the module's docstring), from `parallel_from` objects on; below that, one thread exactly
+    as own.grid_incremental."""
 
     name = "own.grid_parallel"
     defaults = {**IncrementalGrid.defaults, "parallel_from": PARALLEL_FROM_OBJECTS}
@@ -272,3 +276,12 @@ class ParallelIncrementalGrid(IncrementalGrid):
         if not self._chunked:
             return super()._candidates()
         return np.concatenate([self._cand[c, :k] for c, k in enumerate(self._counts)])
+
+
+class ParallelIncrementalGrid(CubesForSpheres, ParallelSquares):
+    """own.grid_incremental with each frame split over every core, from `parallel_from` objects on
+    (below: one thread); over spheres, own.grid's cubes with the pair search split over every core
+    (own/grid3d.py). Its figures use every core: compare them with that in mind."""
+
+    def cube_chunks(self) -> int:
+        return chunk_count() if self.n >= self._parallel_from else 0

@@ -3,7 +3,7 @@
 The list holds every pair whose boxes, each enlarged by half the `skin`, overlap (built with our
 exact grid); each frame only its pairs are tested against the current boxes. A pair that was not
 in the list can overlap only after the two objects have together closed more than the skin, so
-while no object has moved more than skin / 2 (along either axis, since the build) the list holds
+while no object has moved more than skin / 2 (along any axis, since the build) the list holds
 every overlap and the result is exact. `every=None` (the default) rebuilds exactly when that rule
 requires; `every=k` rebuilds every k frames whatever the motion, as molecular dynamics codes do
 (LAMMPS `neigh_modify every`), and misses pairs when objects outrun the skin: a setting that
@@ -24,7 +24,7 @@ from scenes.scene import shown
 
 from .common import PairCollector
 from .grid import UniformGrid
-from .skin import SkinSchedule, filter_pairs, largest_step
+from .skin import FILTER_KERNELS, STEP_KERNELS, SkinSchedule
 from .statics import StaticsApart
 
 PRECISIONS = ("float64", "float32")
@@ -44,6 +44,7 @@ class VerletList(StaticsApart, BroadPhase):
     fat-box pairs, untested)."""
 
     name, method = "own.verlet", "grid"
+    dims = (2, 3)
     defaults = {"skin": None, "every": None, "precision": "float64", "fat": False}
     sweeps = (Knob("skin", sizes(mean_diameter, SKIN_FACTORS), "skin", trial_frames=TRIAL_FRAMES),
               Knob("every", fixed([2, 5, 10, 20]), "rebuild every k frames", period=True),
@@ -70,6 +71,7 @@ class VerletList(StaticsApart, BroadPhase):
         return values
 
     def _reset(self, positions, radii):
+        self._largest_step, self._filter = STEP_KERNELS[self.dim], FILTER_KERNELS[self.dim]
         self._radii = self._rounded(radii)
         positive = self._radii[self._radii > 0]
         default = DEFAULT_SKIN_DIAMETERS * 2.0 * float(positive.mean()) if len(positive) else 1.0
@@ -108,7 +110,7 @@ class VerletList(StaticsApart, BroadPhase):
         positions = self._rounded(positions)
         self._since += 1
         every = self.params["every"]
-        due = (self._since >= every) if every is not None else largest_step(positions, self._anchor) > 0.5 * self._skin
+        due = (self._since >= every) if every is not None else self._largest_step(positions, self._anchor) > 0.5 * self._skin
         if due:
             if self._adapts:
                 self._skin = self._schedule.next(self._since, len(self._list), self._overlapping, len(positions))
@@ -122,11 +124,11 @@ class VerletList(StaticsApart, BroadPhase):
         if self.params["fat"] or (self._skin == 0.0 and self._since == 0):  # the list is this frame's pairs
             self._overlapping = len(self._list)
             return self._list.copy()
-        out, _ = self._collect(filter_pairs, self._list, self._positions, self._radii)
+        out, _ = self._collect(self._filter, self._list, self._positions, self._radii)
         self._overlapping = len(out)
         return out
 
     def validate(self):
         """While the rule holds, the list holds every current overlap."""
         if self.params["every"] is None:
-            assert largest_step(self._positions, self._anchor) <= 0.5 * self._skin, "an object outran the skin"
+            assert self._largest_step(self._positions, self._anchor) <= 0.5 * self._skin, "an object outran the skin"

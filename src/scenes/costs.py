@@ -17,7 +17,7 @@ import numpy as np
 from .scene import Scene
 
 SAMPLE = 4096  # objects in the sample that estimates the pairs
-POSITION_BYTES = 2 * 8  # x, y in float64, per object and frame
+COORDINATE_BYTES = 8  # float64: x, y (and z for spheres) per object and frame
 # Per pair of a frame's exact reference: the box pairs and the contacts (two int64 each), and
 # while it is computed the grid's growing pair buffers (about twice that again).
 REFERENCE_BYTES_PER_PAIR = 2 * 16
@@ -93,15 +93,17 @@ def gib(size: float) -> str:
     return f"{size / 2**30:.1f} GiB" if size >= 2**30 else f"{size / 2**20:.0f} MiB"
 
 
-# A generated scene's own arrays per object (x, y, r, vx, vy in float64), before any frame is stepped.
-SCENE_BYTES_PER_OBJECT = 5 * 8
+def scene_bytes_per_object(dim: int) -> int:
+    """A generated scene's own arrays per object (position, velocity and radius in float64),
+    before any frame is stepped."""
+    return (2 * dim + 1) * COORDINATE_BYTES
 
 
-def size_problem(n: int, frames: int, memory: int | None = None) -> str | None:
+def size_problem(n: int, frames: int, memory: int | None = None, dim: int = 2) -> str | None:
     """Why a scene of n objects stepped for `frames` frames cannot fit in memory, from n alone (a
     lower bound: no pairs counted), so that a hopeless size is refused before any array is made."""
     memory = int(MEMORY_SHARE * available_memory()) if memory is None else memory
-    need = n * (SCENE_BYTES_PER_OBJECT + 2 * frames * POSITION_BYTES + WORKING_BYTES_PER_OBJECT)
+    need = n * (scene_bytes_per_object(dim) + 2 * frames * dim * COORDINATE_BYTES + WORKING_BYTES_PER_OBJECT)
     if need > memory:
         return (f"a scene of n = {n:,} over {frames} frames needs at least {gib(need)} of memory before its pairs "
                 f"are counted; {gib(memory)} can be had here: ask for a smaller --n or fewer --frames")
@@ -114,6 +116,6 @@ def costs(scene: Scene, frames: int, verified: int | None = None) -> Costs:
     verified = frames if verified is None else verified
     pairs = estimated_pairs(scene)
     return Costs(scene.n, frames, verified, pairs,
-                 trajectory_bytes=2 * frames * scene.n * POSITION_BYTES,
+                 trajectory_bytes=2 * frames * scene.n * scene.dim * COORDINATE_BYTES,
                  reference_bytes=int(verified * pairs * REFERENCE_BYTES_PER_PAIR),
                  working_bytes=int(pairs * WORKING_BYTES_PER_PAIR + scene.n * WORKING_BYTES_PER_OBJECT))

@@ -112,10 +112,14 @@ def _frames_of(path: Path) -> int:
     return int(path.stem.rsplit("-f", 1)[1])
 
 
-def family_scene(family: str, n: int, seed: int = 0, radii: tuple[float, float] | None = None) -> Scene:
+def family_scene(family: str, n: int, seed: int = 0, radii: tuple[float, float] | None = None,
+                 dim: int = 2) -> Scene:
     """A scene of `family` with n objects (slots, for rain), circles of radii uniform in `radii`."""
     if family not in FAMILIES:
         raise ValueError(f"unknown family {family!r}; choose one of {', '.join(FAMILIES)}")
+    if dim != 2:
+        raise ValueError(f"the {family} family is recorded with pymunk, a 2D engine: it has no {dim}D scene yet "
+                         "(in 3D: the essay's distributions, or your own trajectory file with a z column)")
     if int(n) != n or n < 2:
         raise ValueError(f"a {family} scene needs n >= 2 objects, got {shown(n)}")
     lo, hi = (float(v) for v in (radii or DEFAULT_RADII))

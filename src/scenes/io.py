@@ -1,7 +1,8 @@
-"""Scene files: CSV with a header `x,y,r` and optional `vx,vy`, one circle per line.
+"""Scene files: CSV with a header `x,y,r` and optional `vx,vy`, one circle per line; with a `z`
+column (and `vz` where velocities are given) one sphere per line.
 
-An optional first line `# box: xmin,ymin,xmax,ymax` gives the walls; without it the box is the
-bounding box of the circles. Every problem is reported as a SceneFileError naming file and line.
+An optional first line `# box: xmin,ymin,xmax,ymax` (spheres: `xmin,ymin,zmin,xmax,ymax,zmax`)
+gives the walls; without it the box is the bounding box of the objects. Every problem is reported as a SceneFileError naming file and line.
 What spreadsheets write is read too: a UTF-8 byte-order mark, and columns separated by
 semicolons or tabs instead of commas (the separator found is named in any error).
 """
@@ -19,7 +20,7 @@ import numpy as np
 from .scene import Scene, check_box
 
 REQUIRED = ("x", "y", "r")
-OPTIONAL = ("vx", "vy")
+OPTIONAL = ("vx", "vy", "z", "vz")
 BOX_PREFIX = "# box:"
 SEPARATORS = {",": "commas", ";": "semicolons", "\t": "tabs"}
 
@@ -59,7 +60,7 @@ def load_scene(path: str | os.PathLike, name: str | None = None) -> Scene:
     first = 0
     if lines and lines[0].startswith(BOX_PREFIX):
         try:
-            box = check_box([float(v) for v in lines[0][len(BOX_PREFIX):].split(",")])
+            box = [float(v) for v in lines[0][len(BOX_PREFIX):].split(",")]
         except ValueError as exc:
             raise SceneFileError(f"{path}, line 1: bad box line ({exc})") from None
         first = 1
@@ -74,14 +75,20 @@ def load_scene(path: str | os.PathLike, name: str | None = None) -> Scene:
     extra = [c for c in header if c not in REQUIRED + OPTIONAL]
     if missing or extra or len(set(header)) != len(header):
         raise SceneFileError(
-            f"{path}, line {header_line}: header must be x,y,r with optional vx,vy; got {','.join(header)}"
+            f"{path}, line {header_line}: header must be x,y,r with optional vx,vy (spheres: z and vz); "
+            f"got {','.join(header)}"
             + (f" (missing {','.join(missing)})" if missing else "")
             + (f" (unknown {','.join(extra)})" if extra else "") + found
         )
     if ("vx" in header) != ("vy" in header):
         raise SceneFileError(f"{path}, line {header_line}: give both vx and vy, or neither")
+    if "vz" in header and not ("z" in header and "vx" in header):
+        raise SceneFileError(f"{path}, line {header_line}: vz needs a z column and vx,vy")
+    if "z" in header and "vx" in header and "vz" not in header:
+        raise SceneFileError(f"{path}, line {header_line}: spheres with velocities need vz as well as vx,vy")
+    dim = 3 if "z" in header else 2
     col = {c: header.index(c) for c in header}
-    values = np.zeros((len(rows) - 1, 5))
+    values = np.zeros((len(rows) - 1, len(REQUIRED + OPTIONAL)))
     kept = 0
     for k, row in enumerate(rows[1:]):
         where = f"{path}, line {header_line + 1 + k}"
@@ -99,24 +106,31 @@ def load_scene(path: str | os.PathLike, name: str | None = None) -> Scene:
     values = values[:kept]
     if kept == 0:
         raise SceneFileError(f"{path}: no circles after the header line")
-    pos, radii, vel = values[:, :2], values[:, 2], values[:, 3:5]
+    radii = values[:, 2]
+    pos, vel = (values[:, [0, 1, 5]], values[:, [3, 4, 6]]) if dim == 3 else (values[:, :2], values[:, 3:5])
     if box is None:
         lo, hi = (pos - radii[:, None]).min(axis=0), (pos + radii[:, None]).max(axis=0)
         pad = np.where(hi > lo, 0.0, 1.0)  # a degenerate extent still needs a box
-        box = (lo[0] - pad[0], lo[1] - pad[1], hi[0] + pad[0], hi[1] + pad[1])
+        box = tuple((lo - pad).tolist() + (hi + pad).tolist())
+    else:
+        try:
+            box = check_box(box, dim)
+        except ValueError as exc:
+            raise SceneFileError(f"{path}, line 1: bad box line ({exc})") from None
     return Scene(pos, radii, vel, box=box, name=name or path.stem, meta={"dist": "file", "file": str(path)})
 
 
 def save_scene(scene: Scene, path: str | os.PathLike) -> Path:
     """Write `scene` (with its box and velocities) so that load_scene gives it back exactly."""
     path = Path(path)
+    header = "x,y,z,r,vx,vy,vz" if scene.dim == 3 else "x,y,r,vx,vy"
     data = np.column_stack([scene.positions, scene.radii, scene.velocities])
     # Write to a temporary file and rename, so an interrupted save never leaves half a scene.
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="") as out:
             out.write(BOX_PREFIX + " " + ",".join(repr(float(v)) for v in scene.box) + "\n")
-            out.write("x,y,r,vx,vy\n")
+            out.write(header + "\n")
             for row in data.tolist():
                 out.write(",".join(repr(v) for v in row) + "\n")
         os.replace(tmp, path)

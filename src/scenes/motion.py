@@ -35,35 +35,36 @@ def respond(positions, velocities, radii, contacts):
     Masses are proportional to r^2 (equal masses if both radii are zero). Momentum and kinetic
     energy are conserved exactly up to rounding; separating or coincident pairs are left alone.
     """
+    dim = positions.shape[1]
     for k in range(contacts.shape[0]):
         i, j = contacts[k, 0], contacts[k, 1]
-        dx = positions[j, 0] - positions[i, 0]
-        dy = positions[j, 1] - positions[i, 1]
-        d2 = dx * dx + dy * dy
-        if d2 == 0.0:
-            continue
-        closing = (velocities[j, 0] - velocities[i, 0]) * dx + (velocities[j, 1] - velocities[i, 1]) * dy
-        if closing >= 0.0:
+        d2 = 0.0
+        closing = 0.0
+        for a in range(dim):
+            d = positions[j, a] - positions[i, a]
+            d2 += d * d
+            closing += (velocities[j, a] - velocities[i, a]) * d
+        if d2 == 0.0 or closing >= 0.0:
             continue
         mi, mj = radii[i] * radii[i], radii[j] * radii[j]
         if mi + mj == 0.0:
             mi = mj = 1.0
         f = 2.0 * closing / (d2 * (mi + mj))
-        velocities[i, 0] += f * mj * dx
-        velocities[i, 1] += f * mj * dy
-        velocities[j, 0] -= f * mi * dx
-        velocities[j, 1] -= f * mi * dy
+        for a in range(dim):
+            d = positions[j, a] - positions[i, a]
+            velocities[i, a] += f * mj * d
+            velocities[j, a] -= f * mi * d
 
 
 @nb.njit(cache=True)
 def move(positions, velocities, radii, dt, box, walls):
     """Constant velocity for dt; with walls, reflect each circle off the box it must stay inside."""
-    n = positions.shape[0]
+    n, dim = positions.shape
     for i in range(n):
-        for a in range(2):
+        for a in range(dim):
             x = positions[i, a] + velocities[i, a] * dt
             if walls:
-                low, high = box[a] + radii[i], box[a + 2] - radii[i]
+                low, high = box[a] + radii[i], box[a + dim] - radii[i]
                 if low > high:  # wider than the box: it stays in the middle
                     low = high = 0.5 * (box[a] + box[a + 2])
                 if x < low:
@@ -111,14 +112,14 @@ class FramePairs(Sequence):
 
 @dataclass(frozen=True)
 class Trajectory:
-    """Frames of one scene: positions (frames, n, 2), plus the exact pairs of each frame; `alive`
+    """Frames of one scene: positions (frames, n, dim), plus the exact pairs of each frame; `alive`
     (frames, n) says which objects exist in each frame (None: all of them, always)."""
 
     scene: Scene
     positions: np.ndarray
     box_pairs: FramePairs  # None for frames not verified
     contacts: FramePairs
-    velocities: np.ndarray  # (frames, n, 2), the velocity at the start of each frame
+    velocities: np.ndarray  # (frames, n, dim), the velocity at the start of each frame
     alive: np.ndarray | None = None
 
     def alive_at(self, frame: int) -> np.ndarray | None:
@@ -173,7 +174,7 @@ class Trajectory:
         depth = 0.0
         for frame, pairs in zip(self.positions, self.contacts):
             if pairs is not None and len(pairs):
-                d = np.hypot(*(frame[pairs[:, 1]] - frame[pairs[:, 0]]).T)
+                d = np.linalg.norm(frame[pairs[:, 1]] - frame[pairs[:, 0]], axis=1)
                 depth = max(depth, float((radii[pairs[:, 0]] + radii[pairs[:, 1]] - d).max()))
         return {
             "energy_drift": (e1 - e0) / e0 if e0 else 0.0,
@@ -202,8 +203,8 @@ def simulate(scene: Scene, frames: int, dt: float = FRAME_DT, verify: Collection
     pos = scene.positions.copy()
     vel = scene.velocities.copy()
     box = np.asarray(scene.box, dtype=np.float64)
-    out_pos = np.empty((frames, scene.n, 2))
-    out_vel = np.empty((frames, scene.n, 2))
+    out_pos = np.empty((frames, scene.n, scene.dim))
+    out_vel = np.empty((frames, scene.n, scene.dim))
     for f in tqdm(range(frames), desc="trajectory and exact pairs", unit="frame", delay=2, file=sys.stderr,
                   leave=False):
         out_pos[f], out_vel[f] = pos, vel
@@ -258,7 +259,7 @@ def momentum(velocities: np.ndarray, radii: np.ndarray) -> np.ndarray:
 def swept_contacts(positions: np.ndarray, radii: np.ndarray) -> np.ndarray:
     """Keys of pairs whose linear paths between consecutive frames come within r_i + r_j.
 
-    Candidates come from the exact grid on circles that cover each object's swept box; each is
+    Candidates come from the exact grid on circles (spheres) that cover each object's swept box; each is
     then tested exactly at its closest approach on the segment (t in [0, 1]).
     """
     from own.common import swept_circles

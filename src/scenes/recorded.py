@@ -7,10 +7,12 @@ another object after a removal (its id is the slot's). Positions of a slot that 
 never read; they are kept finite (the slot's nearest alive position) so every array stays valid.
 
 Files (`load_trajectory`), one line naming the problem for anything wrong:
-- NPZ: `positions` (frames, n, 2), `radii` (n,); optional `alive` (frames, n) bool, `static` (n,)
-  bool, `box` (4,). Positions of objects that are not alive may be NaN.
-- CSV in long form: a header `frame,id,x,y,r` and optional `static`, one row per object per
-  frame it exists in; ids and frame numbers are any integers (sorted, they give slots and frames).
+- NPZ: `positions` (frames, n, 2), or (frames, n, 3) for spheres, `radii` (n,); optional `alive`
+  (frames, n) bool, `static` (n,) bool, `box` (4,), or (6,) for spheres. Positions of objects that
+  are not alive may be NaN.
+- CSV in long form: a header `frame,id,x,y,r` (with a `z` column: spheres) and optional
+  `static`, one row per object per frame it exists in; ids and frame numbers are any integers
+  (sorted, they give slots and frames).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .scene import Scene, check_box, check_mask, check_radii
+from .scene import DIMS, Scene, check_box, check_mask, check_radii
 
 MIN_FRAMES = 2  # the untimed warm-up frame and one timed frame
 
@@ -33,7 +35,7 @@ class TrajectoryFileError(ValueError):
 
 @dataclass(frozen=True, eq=False)
 class Recording:
-    """Frames of recorded motion: positions (frames, n, 2); alive (frames, n) bool or None (every
+    """Frames of recorded motion: positions (frames, n, 2), or (frames, n, 3); alive (frames, n) bool or None (every
     object in every frame). Static objects are the scene's (`Scene.static`)."""
 
     positions: np.ndarray
@@ -81,10 +83,10 @@ def recorded_scene(positions, radii, alive=None, static=None, box=None, name: st
                    source: str = "", meta: dict | None = None) -> Scene:
     """A Scene whose motion is these frames; checks every array, raising ValueError naming the problem."""
     pos = np.asarray(positions, dtype=np.float64) if np.asarray(positions).dtype.kind in "fiu" else None
-    if pos is None or pos.ndim != 3 or pos.shape[2] != 2:
-        raise ValueError(f"positions must be a (frames, n, 2) array of numbers, got "
+    if pos is None or pos.ndim != 3 or pos.shape[2] not in DIMS:
+        raise ValueError(f"positions must be a (frames, n, 2) or (frames, n, 3) array of numbers, got "
                          f"{np.shape(positions)} {np.asarray(positions).dtype}")
-    frames, n, _ = pos.shape
+    frames, n, dim = pos.shape
     radii = check_radii(radii, n)
     if frames < MIN_FRAMES:
         raise ValueError(f"the recording has {frames} frame(s); at least {MIN_FRAMES} are needed "
@@ -107,7 +109,7 @@ def recorded_scene(positions, radii, alive=None, static=None, box=None, name: st
             raise ValueError(f"object {ids[k]} is static but moves in frame {f}")
     if box is None:
         box = _bounding_box(pos, radii, present)
-    scene = Scene(pos[0], radii, np.zeros((n, 2)), box=check_box(box), name=name, walls=False, responds=False,
+    scene = Scene(pos[0], radii, np.zeros((n, dim)), box=check_box(box, dim), name=name, walls=False, responds=False,
                   static=static_mask, motion=Recording(pos, alive_mask, source),
                   meta={"dist": "recorded", **(meta or {})})
     return scene
@@ -115,16 +117,17 @@ def recorded_scene(positions, radii, alive=None, static=None, box=None, name: st
 
 def _bounding_box(positions: np.ndarray, radii: np.ndarray, present: np.ndarray) -> tuple[float, ...]:
     """The box around every alive object in every frame, with a unit pad where it is flat."""
+    dim = positions.shape[2]
     if not present.any():
-        return (0.0, 0.0, 1.0, 1.0)
-    lo = np.full(2, np.inf)
-    hi = np.full(2, -np.inf)
+        return (0.0,) * dim + (1.0,) * dim
+    lo = np.full(dim, np.inf)
+    hi = np.full(dim, -np.inf)
     for frame, here in zip(positions, present):
         if here.any():
             lo = np.minimum(lo, (frame[here] - radii[here, None]).min(axis=0))
             hi = np.maximum(hi, (frame[here] + radii[here, None]).max(axis=0))
     pad = np.where(hi > lo, 0.0, 1.0)
-    return (lo[0] - pad[0], lo[1] - pad[1], hi[0] + pad[0], hi[1] + pad[1])
+    return tuple((lo - pad).tolist() + (hi + pad).tolist())
 
 
 def load_trajectory(path: str | os.PathLike, name: str | None = None) -> Scene:
@@ -172,9 +175,9 @@ def _read_csv(path: Path) -> dict:
         raise TrajectoryFileError(f"{path}: not a readable CSV file ({str(exc).splitlines()[0]})") from None
     table.columns = [str(c).strip().lower() for c in table.columns]
     missing = [c for c in CSV_COLUMNS if c not in table.columns]
-    unknown = [c for c in table.columns if c not in CSV_COLUMNS + ("static",)]
+    unknown = [c for c in table.columns if c not in CSV_COLUMNS + ("z", "static")]
     if missing or unknown:
-        raise TrajectoryFileError(f"{path}: header must be frame,id,x,y,r with optional static; got "
+        raise TrajectoryFileError(f"{path}: header must be frame,id,x,y,r with optional z (spheres) and static; got "
                                   f"{','.join(table.columns)}" + (f" (missing {','.join(missing)})" if missing else "")
                                   + (f" (unknown {','.join(unknown)})" if unknown else ""))
     if table.empty:
@@ -206,8 +209,9 @@ def _read_csv(path: Path) -> dict:
         row = int(np.flatnonzero(changed)[0])
         raise TrajectoryFileError(f"{path}, line {row + 2}: object {ids[slot_of[row]]} changes radius "
                                   "(a radius is the object's, the same in every frame)")
-    positions = np.full((frames, n, 2), np.nan)
-    positions[frame_of, slot_of] = table[["x", "y"]].to_numpy(float)
+    axes = ["x", "y", "z"] if "z" in table.columns else ["x", "y"]
+    positions = np.full((frames, n, len(axes)), np.nan)
+    positions[frame_of, slot_of] = table[axes].to_numpy(float)
     alive = np.zeros((frames, n), dtype=bool)
     alive[frame_of, slot_of] = True
     static = None

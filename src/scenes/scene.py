@@ -13,6 +13,7 @@ FloatArray = npt.NDArray[np.float64]
 
 # The essay's arena: a 2000 x 2000 px box.
 ESSAY_BOX: tuple[float, float, float, float] = (0.0, 0.0, 2000.0, 2000.0)
+DIMS: tuple[int, ...] = (2, 3)  # circles in a plane, spheres in space
 
 
 def shown(value: object) -> str:
@@ -80,15 +81,28 @@ def check_radii(radii: object, n: int) -> FloatArray:
     return np.ascontiguousarray(arr)
 
 
-def check_box(box: object) -> tuple[float, float, float, float]:
-    """Return the box as (xmin, ymin, xmax, ymax) floats with min < max on both axes."""
+BOX_NAMES = {2: "(xmin, ymin, xmax, ymax)", 3: "(xmin, ymin, zmin, xmax, ymax, zmax)"}
+
+
+def check_box(box: object, dim: int = 2) -> tuple[float, ...]:
+    """Return the box as 2 * dim floats, the low corner then the high one ((xmin, ymin, xmax,
+    ymax) in 2D, (xmin, ymin, zmin, xmax, ymax, zmax) in 3D), with min < max on every axis."""
     try:
-        xmin, ymin, xmax, ymax = (float(v) for v in box)  # type: ignore[union-attr]
+        values = tuple(float(v) for v in box)  # type: ignore[union-attr]
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"box must be four numbers (xmin, ymin, xmax, ymax), got {box!r}") from exc
-    if not all(np.isfinite([xmin, ymin, xmax, ymax])) or not (xmin < xmax and ymin < ymax):
-        raise ValueError(f"box must be finite with xmin < xmax and ymin < ymax, got {box!r}")
-    return xmin, ymin, xmax, ymax
+        raise ValueError(f"box must be {2 * dim} numbers {BOX_NAMES[dim]}, got {box!r}") from exc
+    if len(values) != 2 * dim:
+        raise ValueError(f"box must be {2 * dim} numbers {BOX_NAMES[dim]}, got {box!r}")
+    low, high = values[:dim], values[dim:]
+    if not all(np.isfinite(values)) or not all(a < b for a, b in zip(low, high)):
+        raise ValueError(f"box must be finite with min < max on every axis, got {box!r}")
+    return values
+
+
+def box_extent(box: tuple[float, ...]) -> np.ndarray:
+    """The box's side along each axis."""
+    dim = len(box) // 2
+    return np.subtract(box[dim:], box[:dim])
 
 
 def check_mask(mask: object, shape: tuple[int, ...], what: str) -> np.ndarray | None:
@@ -107,7 +121,8 @@ def check_mask(mask: object, shape: tuple[int, ...], what: str) -> np.ndarray | 
 
 @dataclass(frozen=True)
 class Scene:
-    """n circles: centres (n, 2), radii (n,), velocities (n, 2) in units per second, and the box.
+    """n circles: centres (n, 2), radii (n,), velocities (n, 2) in units per second, and the box;
+    or n spheres: centres and velocities (n, 3) and a box of six numbers (`dim` is 3).
 
     The flags say which parts of the essay's motion the scene uses; stepping does only those.
     `static` (n,) bool marks objects that never move (two statics are never a pair); `motion`,
@@ -119,7 +134,7 @@ class Scene:
     positions: FloatArray
     radii: FloatArray
     velocities: FloatArray
-    box: tuple[float, float, float, float] = ESSAY_BOX
+    box: tuple[float, ...] = ESSAY_BOX
     name: str = "scene"
     moves: bool = True
     walls: bool = True
@@ -129,17 +144,22 @@ class Scene:
     motion: object | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
-        pos = check_positions(self.positions)
-        n = pos.shape[0]
+        pos = check_positions(self.positions, dims=DIMS)
+        n, dim = pos.shape
         object.__setattr__(self, "positions", pos)
         object.__setattr__(self, "radii", check_radii(self.radii, n))
-        object.__setattr__(self, "velocities", check_positions(self.velocities, n, what="velocities"))
-        object.__setattr__(self, "box", check_box(self.box))
+        object.__setattr__(self, "velocities", check_positions(self.velocities, n, "velocities", (dim,)))
+        object.__setattr__(self, "box", check_box(self.box, dim))
         object.__setattr__(self, "static", check_mask(self.static, (n,), "static"))
 
     @property
     def n(self) -> int:
         return int(self.positions.shape[0])
+
+    @property
+    def dim(self) -> int:
+        """2 for circles, 3 for spheres."""
+        return int(self.positions.shape[1])
 
     @property
     def static_share(self) -> float:

@@ -83,6 +83,28 @@ def warn_unavailable(chosen: list[str]) -> dict[str, str]:
     return missing
 
 
+def compact_names(chosen: list[str]) -> list[str]:
+    """Backend names, a whole family written as "family.*"."""
+    out: list[str] = []
+    for family in dict.fromkeys(n.split(".")[0] for n in chosen):
+        members = [n for n in engines.names() if n.split(".")[0] == family]
+        out += [f"{family}.*"] if set(members) <= set(chosen) else [n for n in chosen if n.split(".")[0] == family]
+    return out
+
+
+def in_dimension(chosen: list[str], dim: int) -> list[str]:
+    """The chosen backends that work in `dim` dimensions; the others are named in one line (by
+    family) as not run, and a choice of none at all is a CliError."""
+    planar = [n for n in chosen if not engines.works_in(n, dim)]
+    kept = [n for n in chosen if n not in planar]
+    if planar:
+        print(f"not run in {dim}D, they work in 2D only: {', '.join(compact_names(planar))}")
+    if not kept:
+        raise CliError(f"none of the backends chosen works in {dim}D ({', '.join(planar)}); "
+                       "see --list with the same --dim")
+    return kept
+
+
 def command_line(study: str, argv: list[str] | None) -> str:
     """The command as the user typed it, for meta.json."""
     return " ".join([f"python -m studies.{study}", *(sys.argv[1:] if argv is None else argv)])

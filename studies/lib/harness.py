@@ -354,5 +354,5 @@ def _crash_status(code: int | None) -> str:
 def scene_columns(s: Scene) -> dict[str, Any]:
     """The columns that describe the scene, the same on every row of a run."""
     r_min, r_max = s.radius_range
-    return {"scene": s.name, "dist": s.meta.get("dist", ""), "n": s.n, "radius_min": r_min, "radius_max": r_max,
+    return {"scene": s.name, "dist": s.meta.get("dist", ""), "n": s.n, "dim": s.dim, "radius_min": r_min, "radius_max": r_max,
             "speed": s.meta.get("speed", ""), "seed": s.meta.get("seed", "")}

@@ -6,6 +6,8 @@ written from them. A study that needs something else gets a new name (recommend'
 
 - `--n --dist --radius --radii --speed --seed --box`: a generated scene (its box at the essay's coverage unless
   `--box` is given)
+- `--dim 2|3`: circles in a plane (default) or spheres in a cube, for every scene a study makes (a
+  scene or trajectory file has the dimension of its columns)
 - `--scene FILE.csv`: your own scene file (stress adds it to its scenes)
 - `--trajectory FILE`: your own recorded frames (.npz or long-form .csv; stress adds it too)
 - `--backends PATTERN[,PATTERN]`: which backends, as globs over the registry
@@ -27,6 +29,8 @@ from __future__ import annotations
 import argparse
 
 from scenes import DISTRIBUTIONS, ESSAY_COVERAGE, FAMILIES, SCENE_KINDS, Scene, generate
+from scenes.generate import cube
+from scenes.scene import DIMS
 from scenes.costs import size_problem
 from scenes.io import load_scene
 from scenes.recorded import load_trajectory
@@ -49,9 +53,22 @@ def add_scene_options(parser: argparse.ArgumentParser, n: int = 2048) -> None:
     g.add_argument("--speed", type=float, default=10.0, help="speed in units per second (default 10)")
     g.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     g.add_argument("--box", type=float, metavar="SIDE",
-                   help="side of the square box (default: the box in which the objects' boxes cover "
-                        f"{ESSAY_COVERAGE * 100:.1f}%% of the area, as in the essay's scene)")
+                   help="side of the square (cube) box (default: the box in which the objects' boxes cover "
+                        f"{ESSAY_COVERAGE * 100:.1f}%% of the area, or volume, as in the essay's scene)")
+    add_dim_option(g)
     add_scene_file_option(g)
+
+
+def add_dim_option(parser) -> None:
+    """--dim: circles (2) or spheres (3)."""
+    parser.add_argument("--dim", type=int, choices=DIMS, default=None,
+                        help="2: circles in a plane (the essay's); 3: spheres in a cube at the same coverage of its "
+                             "volume (default 2, or the dimension of a --scene or --trajectory file)")
+
+
+def dim_of(args: argparse.Namespace) -> int:
+    """The dimension the options ask for (2 unless --dim says otherwise)."""
+    return getattr(args, "dim", None) or 2
 
 
 def add_scene_file_option(parser) -> None:
@@ -68,12 +85,19 @@ def file_scene(args: argparse.Namespace) -> Scene | None:
     """The user's own scene (--scene) or recorded frames (--trajectory), or None; a bad file is a CliError."""
     try:
         if getattr(args, "trajectory", None):
-            return load_trajectory(args.trajectory)
-        if getattr(args, "scene", None):
-            return load_scene(args.scene)
+            scene = load_trajectory(args.trajectory)
+        elif getattr(args, "scene", None):
+            scene = load_scene(args.scene)
+        else:
+            return None
     except ValueError as exc:
         raise CliError(str(exc)) from None
-    return None
+    asked = getattr(args, "dim", None)
+    if asked is not None and asked != scene.dim:
+        columns = "x,y,z" if scene.dim == 3 else "x,y (no z column)"
+        raise CliError(f"--dim {asked} but {args.trajectory or args.scene} has {columns}: a {scene.dim}D scene; "
+                       f"drop --dim or give a file with {'a z column' if asked == 3 else 'no z column'}")
+    return scene
 
 
 def scene_from_args(args: argparse.Namespace) -> Scene:
@@ -81,7 +105,8 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
     given = file_scene(args)
     if given is not None:
         return given
-    problem = size_problem(args.n, (getattr(args, "frames", None) or 1) + 1)
+    dim = dim_of(args)
+    problem = size_problem(args.n, (getattr(args, "frames", None) or 1) + 1, dim=dim)
     if problem:
         raise CliError(problem)
     try:
@@ -92,10 +117,11 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
             except ValueError:
                 raise CliError(f"--radii must look like MIN:MAX (e.g. 1:100), got {args.radii!r}") from None
             radii = (lo, hi)
-        box = None if args.box is None else (0.0, 0.0, args.box, args.box)
+        box = None if args.box is None else cube(args.box, dim)
         if args.dist in FAMILIES and box is not None:
             raise CliError(f"--box does not apply to the {args.dist} family: it has its own container")
-        return generate(args.dist, args.n, radius=args.radius, radii=radii, seed=args.seed, speed=args.speed, box=box)
+        return generate(args.dist, args.n, radius=args.radius, radii=radii, seed=args.seed, speed=args.speed, box=box,
+                        dim=dim)
     except ValueError as exc:
         raise CliError(str(exc)) from None
 

@@ -29,11 +29,13 @@ from own.common import LEFT_OUT
 from .cli import NO_SPACE, CliError
 
 COLUMNS = [
-    "backend", "params", "experiment", "label", "scene", "dist", "n", "radius_min", "radius_max", "speed", "seed",
+    "backend", "params", "experiment", "label", "scene", "dist", "n", "dim", "radius_min", "radius_max", "speed", "seed",
     "repeat", "frame", "t_update_s", "t_pairs_s", "t_narrow_s", "t_total_s", "t_engine_broadphase_s", "candidates",
     "true_pairs", "missed", "false_positives", "box_pairs", "box_missed", "reports", "t_setup_s", "status", "stats",
     "tunneled", "peak_rss_mb", "host", "cpu", "job",
 ]
+# Columns added since the first version, with the value every earlier row means (dim: circles).
+ADDED_COLUMNS = {"dim": 2}
 STAGES = ["update", "pairs", "narrow", "total"]
 PARTIAL, FINAL = "results.partial.csv", "results.csv"
 
@@ -257,7 +259,11 @@ def read_rows(folder: Path) -> tuple[pd.DataFrame, bool]:
 
 
 def _checked(rows: pd.DataFrame, path: Path) -> pd.DataFrame:
-    """The rows, if the file has a study's columns; else one clear line naming what it lacks."""
+    """The rows, if the file has a study's columns; else one clear line naming what it lacks.
+    Columns added since an earlier version's file take the value its rows meant."""
+    for column, value in ADDED_COLUMNS.items():
+        if column not in rows.columns:
+            rows[column] = value
     lacking = [c for c in COLUMNS if c not in rows.columns]
     if lacking:
         raise CliError(f"{path} is not a study's rows: it lacks the columns {', '.join(lacking[:5])}"
