@@ -15,6 +15,12 @@ numbered along a Morton curve, as particle codes renumber theirs now and then. T
 held to the generated order; the last column shows what memory order alone is worth (most at
 n = 2^20, where the centres no longer fit in the caches).
 
+With --dim 3 the scenes are spheres at the essay's coverage of a cube's volume. There are no
+targets over spheres: the bar is the rivals, every engine and neighbour-list library that works in
+3D, each run in the compare harness (a child process, pairs checked between frames) at each n it
+reached at the n before, and set against our fastest in the same harness, end to end (update,
+pairs, narrow phase) and against the engines' own broad-phase timers.
+
 With --coherence it prints instead what temporal coherence saves: each of our sorted structures
 sorted from scratch every frame against kept in last frame's order and repaired, with the repair's
 work per frame (frames the trees kept their structure under their skin, rows or entries moved by
@@ -33,14 +39,15 @@ import numpy as np
 import engines
 from engines.pairs import keys
 from own.bvh import morton_codes
-from own.floor import floor_frame
+from own.morton import morton_codes3
+from own.floor import FLOOR_KERNELS
 from own.parallel import threading_layer, threads
 from scenes.generate import at_essay_density
 from scenes.motion import Trajectory, simulate
 
-from .lib.cli import CliError, Parser, command_line, run_cli
+from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli
 from .lib.harness import Job, run_isolated
-from .lib.options import add_quick_option, parse_checked
+from .lib.options import add_backends_option, add_dim_option, add_quick_option, dim_of, parse_checked
 from .lib.output import Output
 
 # The targets, ms per frame (update + pairs) on a 2-core machine of this kind, for the fastest of
@@ -55,7 +62,8 @@ SMALL = (4, 16, 64)
 CLUSTERED_FLOOR_MULTIPLE = {131072: 2.0}
 # Each family shown by its best single-thread variant; all pairs only where n is small.
 VARIANTS = {"own.grid": ["own.grid", "own.grid_incremental"], "own.sap": ["own.sap", "own.sap_incremental"],
-            "own.quadtree": ["own.quadtree"], "own.brute": ["own.brute"]}
+            "own.quadtree": ["own.quadtree"], "own.bvh": ["own.bvh"], "own.verlet": ["own.verlet"],
+            "own.brute": ["own.brute"]}
 # Measured against the both-cores target, and labelled apart: they use every core.
 PARALLEL = {"own.grid": ["own.grid_parallel"], "own.sap": ["own.sap_parallel"]}
 # Passes over the frames in the tight loop: at least this many, and more until --seconds have
@@ -65,6 +73,11 @@ PARALLEL = {"own.grid": ["own.grid_parallel"], "own.sap": ["own.sap_parallel"]}
 # not see the machine quiet at all.
 MIN_PASSES = 3
 SECONDS = 2.0
+MORTON3_BITS = 10  # per axis for the spatial order of spheres: 2^30 cells, far more than objects
+# Over spheres: the sizes measured, and the rivals' limits in the harness (a rival that stops at
+# one size is not run at the next).
+SPHERE_SIZES = (2048, 131072, 1048576)
+RIVAL_BUDGET_S, RIVAL_TIMEOUT_S = 2.0, 180.0
 # Our backends that keep a sorted order between frames: (parameters that sort from scratch every
 # frame, parameters that keep last frame's order and repair it).
 COHERENCE = {
@@ -111,7 +124,8 @@ def tight_loop(backend: str, traj: Trajectory, seconds: float, **params) -> tupl
 
 def spatial_order(positions: np.ndarray) -> np.ndarray:
     """A numbering of the objects along a Morton curve through their centres."""
-    return np.argsort(morton_codes(positions), kind="stable")
+    codes = morton_codes(positions) if positions.shape[1] == 2 else morton_codes3(positions, MORTON3_BITS)
+    return np.argsort(codes, kind="stable")
 
 
 def harness_ms(backend: str, traj: Trajectory) -> float:
@@ -122,14 +136,15 @@ def harness_ms(backend: str, traj: Trajectory) -> float:
     return float(np.median([r["t_update_s"] + r["t_pairs_s"] for r in result.rows]) * 1e3)
 
 
-def _trajectory(dist: str, n: int, frames: int) -> Trajectory:
+def _trajectory(dist: str, n: int, frames: int, dim: int = 2) -> Trajectory:
     """The scene of n objects stepped for the timed frames after frame 0: fewer at a million
     objects, where each frame's exact reference is itself costly."""
-    return simulate(at_essay_density(dist, n), (frames if n <= 131072 else max(2, frames // 3)) + 1)
+    return simulate(at_essay_density(dist, n, dim=dim), (frames if n <= 131072 else max(2, frames // 3)) + 1)
 
 
 def floor_ms(traj: Trajectory, seconds: float) -> float:
     """The floor's median ms per frame (own/floor.py) in its fastest pass, timed like the backends."""
+    floor_frame = FLOOR_KERNELS[traj.scene.dim]
     out = np.empty((max(len(p) for p in traj.box_pairs[1:]), 2), dtype=np.int64)
     floor_frame(traj.positions[1], traj.box_pairs[1], out)  # compile
     medians, start = [], time.perf_counter()
@@ -159,6 +174,12 @@ def ms_without(backend: str, traj: Trajectory, seconds: float, used: bool, **par
     return f"{tight_loop(backend, traj, seconds, **params)[0]:.4f}" if used else "-"
 
 
+def variants_in(groups: dict[str, list[str]], dim: int) -> dict[str, list[str]]:
+    """The backends of each group that work in `dim` dimensions (groups left empty dropped)."""
+    kept = {family: [v for v in variants if engines.works_in(v, dim)] for family, variants in groups.items()}
+    return {family: variants for family, variants in kept.items() if variants}
+
+
 def print_targets(trajectories, seconds: float, table: "Table") -> None:
     print(f"Parallel variants run on {threads()} threads ({threading_layer()} threading layer). 'general ms': the same "
           f"backend with its general kernels, where it left out a part the scene does not need (specialise=False). "
@@ -173,11 +194,13 @@ def print_targets(trajectories, seconds: float, table: "Table") -> None:
         floor = floor_ms(traj, seconds)
         pairs = float(np.median([len(p) for p in traj.box_pairs[1:]]))
         in_space = traj.renumbered(spatial_order(traj.positions[0]))
-        families = [f for f in VARIANTS if f != "own.brute" or n <= max(SMALL)]
-        rows = [(family, VARIANTS[family], 1) for family in families]
-        one, both, what = target_of(n, dist, floor)
-        if both is not None:
-            rows += [(family, variants, threads()) for family, variants in PARALLEL.items()]
+        dim = traj.scene.dim
+        variants = variants_in(VARIANTS, dim)
+        families = [f for f in variants if f != "own.brute" or n <= max(SMALL)]
+        rows = [(family, variants[family], 1) for family in families]
+        one, both, what = target_of(n, dist, floor) if dim == 2 else (None, None, "")
+        if both is not None or (dim == 3 and n > max(SMALL)):  # spheres: no targets, every core measured anyway
+            rows += [(family, group, threads()) for family, group in variants_in(PARALLEL, dim).items()]
         best = {1: (float("inf"), ""), threads(): (float("inf"), "")}
         for family, variants, used in rows:
             measured = {v: tight_loop(v, traj, seconds) for v in variants}
@@ -206,10 +229,84 @@ def print_targets(trajectories, seconds: float, table: "Table") -> None:
             verdicts.append(f"n = {n:>7} {dist:<9} {label:<10} "
                             f"target {target:.4f} ms{f' ({what})' if what else ''}: {pick} {fastest:.4f} ms, "
                             f"{fastest / floor:.1f}x the floor of {floor:.4f} ms: {verdict}")
-    print("\nTargets (fastest pass of the fastest of our backends):")
+    if verdicts:
+        print("\nTargets (fastest pass of the fastest of our backends):")
+        for line in verdicts:
+            print("  " + line)
+        table.meta(targets=verdicts)
+
+
+def harness_figures(backend: str, traj: Trajectory, budget_s: float, timeout_s: float) -> dict:
+    """One run in the compare harness: median ms per frame end to end (update, pairs, narrow
+    phase), of update + pairs, and of the engine's own broad-phase timer where it has one; with
+    the run's status."""
+    result = run_isolated(Job(backend, budget_s=budget_s, timeout_s=timeout_s), traj)
+    rows = result.rows if result.status == "ok" else []
+    missed = sum(int(r["missed"] or 0) for r in rows)
+    engine = [r["t_engine_broadphase_s"] for r in rows if r["t_engine_broadphase_s"] is not None]
+    return {"status": result.status, "missed": missed,
+            "total_ms": float(np.median([r["t_total_s"] for r in rows]) * 1e3) if rows else float("nan"),
+            "broad_ms": float(np.median([r["t_update_s"] + r["t_pairs_s"] for r in rows]) * 1e3) if rows else
+            float("nan"),
+            "engine_ms": float(np.median(engine) * 1e3) if engine else float("nan")}
+
+
+def print_rivals(trajectories, table: "Table", chosen: list[str]) -> None:
+    """Over spheres: our backends and every rival that works in 3D (engines, neighbour-list
+    libraries, general libraries), each in the compare harness at each n; a rival that did not
+    finish one n is not run at the next. Per n, our fastest against the fastest engine and the
+    fastest library, end to end and on the engines' own timers."""
+    dim = 3
+    ours = [n for n in engines.available() if engines.of_kind(n, "own") and engines.works_in(n, dim)
+            and engines.backend_class(n).exact and n != "own.brute"]
+    rivals = [n for n in chosen if n in engines.available() and engines.of_kind(n, "engine", "particle", "library")
+              and engines.works_in(n, dim)]
+    print(f"\nIn the compare harness (pairs checked between frames; a rival stops past {RIVAL_BUDGET_S:g} s a frame or "
+          f"{RIVAL_TIMEOUT_S:g} s a run):")
+    print(f"{'n':>9} {'backend':<20} {'kind':<9} {'total ms':>10} {'update+pairs ms':>16} {'engine timer ms':>16} "
+          f"{'missed':>7}  status")
+    verdicts = []
+    for traj in trajectories:
+        n = traj.scene.n
+        measured = {}
+        for backend in ours + rivals:
+            kind = engines.family(backend).kind
+            figures = harness_figures(backend, traj, RIVAL_BUDGET_S if kind != "own" else float("inf"),
+                                      RIVAL_TIMEOUT_S)
+            measured[backend] = figures
+            table.add({"n": n, "dim": dim, "backend": backend, "kind": kind, **figures})
+            print(f"{n:>9} {backend:<20} {kind:<9} {figures['total_ms']:>10.3f} {figures['broad_ms']:>16.3f} "
+                  f"{figures['engine_ms']:>16.3f} {figures['missed']:>7}  {figures['status']}", flush=True)
+        rivals = [r for r in rivals if measured[r]["status"] == "ok"]  # the next n: those that finished this one
+        verdicts += rival_verdicts(n, measured)
+    print("\nOurs against the rivals over spheres (one thread each; the harness's figures):")
     for line in verdicts:
         print("  " + line)
-    table.meta(targets=verdicts)
+    table.meta(rivals=verdicts)
+
+
+def rival_verdicts(n: int, measured: dict[str, dict]) -> list[str]:
+    """Our fastest on one thread against the fastest engine and the fastest library at this n,
+    end to end, and against the fastest engine timer (ours: update + pairs)."""
+    def fastest(names: list[str], key: str) -> tuple[str, float] | None:
+        done = [(measured[b][key], b) for b in names if measured[b]["status"] == "ok" and np.isfinite(measured[b][key])]
+        return (min(done)[1], min(done)[0]) if done else None
+
+    ours = fastest([b for b in measured if engines.ours_on_one_thread(b)], "total_ms")
+    ours_broad = fastest([b for b in measured if engines.ours_on_one_thread(b)], "broad_ms")
+    lines = []
+    for label, kinds, key in (("engine", ("engine",), "total_ms"), ("library", ("particle", "library"), "total_ms"),
+                              ("engine's own timer", ("engine",), "engine_ms")):
+        rival = fastest([b for b in measured if engines.of_kind(b, *kinds)], key)
+        mine = ours_broad if key == "engine_ms" else ours
+        if rival is None or mine is None:
+            lines.append(f"n = {n:>7}: no {label} finished" if mine else f"n = {n:>7}: none of ours finished")
+            continue
+        ratio = rival[1] / mine[1]
+        lines.append(f"n = {n:>7} fastest {label}: {rival[0]} {rival[1]:.3f} ms, ours {mine[0]} {mine[1]:.3f} ms"
+                     + (" (update + pairs)" if key == "engine_ms" else "")
+                     + f": {ratio:.1f}x, {'ours ahead' if ratio > 1 else 'OURS BEHIND'}")
+    return lines
 
 
 def print_coherence(trajectories, seconds: float, table: "Table") -> None:
@@ -249,6 +346,8 @@ def parser() -> Parser:
                    help="time each sorted structure from scratch against repaired from last frame's order")
     p.add_argument("--out", metavar="DIR", help="output folder (default results/bench-<date>-<time>): bench.csv, "
                                                 "a row per line printed, written as each is measured, and meta.json")
+    add_dim_option(p)
+    add_backends_option(p, what="the rivals set against ours over spheres (--dim 3)")
     return p
 
 
@@ -256,8 +355,8 @@ class Table:
     """bench.csv in the output folder, a row appended (and flushed) as each is measured, so an
     interrupted run keeps what it printed; meta.json beside it."""
 
-    def __init__(self, out: Output) -> None:
-        self.out, self.path, self._columns = out, out.path / "bench.csv", None
+    def __init__(self, out: Output, name: str = "bench.csv") -> None:
+        self.out, self.path, self._columns = out, out.path / name, None
 
     def add(self, row: dict) -> None:
         with open(self.path, "a" if self._columns else "w", newline="") as f:
@@ -275,14 +374,25 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_checked(parser(), argv)
     if not 0 <= args.seconds < float("inf"):
         raise CliError("--seconds must be a finite number >= 0")
-    scenes = [("uniform", 2048)] if args.quick else \
-        [("uniform", n) for n in TARGETS_MS] + [("clusters", n) for n in CLUSTERED_FLOOR_MULTIPLE]
+    dim = dim_of(args)
+    if dim == 3 and args.coherence:
+        raise CliError("--coherence compares the sorted structures of circles; over spheres, bench --dim 3 "
+                       "measures ours against the rivals")
+    if dim == 3:
+        scenes = [("uniform", 2048)] if args.quick else [("uniform", n) for n in SPHERE_SIZES]
+    else:
+        scenes = [("uniform", 2048)] if args.quick else \
+            [("uniform", n) for n in TARGETS_MS] + [("clusters", n) for n in CLUSTERED_FLOOR_MULTIPLE]
     with Output(args.out, "bench", command_line("bench", argv)) as out:
         table = Table(out)
-        out.meta(frames=args.frames, seconds=args.seconds, coherence=args.coherence)
+        out.meta(frames=args.frames, seconds=args.seconds, coherence=args.coherence, dim=dim)
         if args.coherence:
             sizes = [2048] if args.quick else [n for n in TARGETS_MS if n not in SMALL]
             print_coherence((_trajectory("uniform", n, args.frames) for n in sizes), args.seconds, table)
+        elif dim == 3:
+            trajectories = [_trajectory(dist, n, args.frames, dim) for dist, n in scenes]
+            print_targets(trajectories, args.seconds, table)
+            print_rivals(trajectories, Table(out, "rivals.csv"), matched_backends(args.backends))
         else:
             print_targets((_trajectory(dist, n, args.frames) for dist, n in scenes), args.seconds, table)
     print(f"\nwrote {table.path} and {out.path / 'meta.json'}")

@@ -21,7 +21,7 @@ import engines
 from engines.knobs import frames_needed
 from scenes.costs import costs
 
-from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli, warn_unavailable
+from .lib.cli import CliError, Parser, command_line, in_dimension, matched_backends, run_cli, warn_unavailable
 from .lib.figures import backend_colour, new_figure, save
 from .lib.harness import Job, Outcome, scene_columns
 from .lib.options import (add_backends_option, add_output_options, add_scene_options, add_trial_options,
@@ -366,8 +366,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     if args.report_only:
         return report_only(Path(args.out))
-    chosen = matched_backends(args.backends)
     scene = scene_from_args(args)
+    chosen = in_dimension(matched_backends(args.backends), scene.dim)
     with Output(args.out, "recommend", command_line("recommend", argv), args.resume) as out:
         missing = warn_unavailable(chosen)
         backends = run_order([b for b in chosen if b not in missing])
@@ -491,7 +491,8 @@ def fastest_inexact(found, max_error: float) -> Trial | None:
 def tune(entries: list[Entry], trials: Trials, deadline: float) -> None:
     """Tune the backends with knobs that could still win, then re-measure the tuned setting."""
     trials.deadline = deadline  # the time the trials left is tuning's
-    eligible = sorted((e for e in entries if e.eligible and tunable([e.backend])), key=lambda e: e.trial.median_ms)
+    eligible = sorted((e for e in entries if e.eligible and tunable([e.backend], trials.scene.dim)),
+                      key=lambda e: e.trial.median_ms)
     leader = min((e.trial.median_ms for e in entries if e.eligible), default=float("inf"))
     for e in eligible:
         if e.trial.median_ms > TUNE_WITHIN * leader:

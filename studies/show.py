@@ -4,6 +4,7 @@ Draws the scene's circles with the backend's structure (grid cells, quadtree nod
 intervals along the sweep axis), every candidate pair as a thin grey segment, the truly
 overlapping pairs it found in green and any pair it should have reported but missed in red.
 `--animate N` writes a GIF of the first N frames of the stepped scene as the backend sees them.
+Spheres (`--dim 3`) are drawn projected on the x-y plane, without the structure.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import engines
 from own.small import SmallScenes
 from scenes.motion import simulate
 
-from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli
+from .lib.cli import CliError, Parser, command_line, in_dimension, matched_backends, run_cli
 from .lib.drawing import draw_frame, new_figure, relayout
 from .lib.options import add_backends_option, add_scene_options, parse_checked, scene_from_args
 from .lib.output import Output
@@ -76,9 +77,11 @@ class Stepper:
         self.backend.update(traj.positions[f], traj.alive_at(f))
         candidates = self.backend.pairs()
         must = traj.box_pairs[f] if self.backend.reports == "boxes" else traj.contacts[f]
-        structure = self.backend.structure()
-        shown = "" if structure else " (structure not exposed by this backend)"
-        counts = draw_frame(fig, traj.positions[f], traj.scene.radii, structure, candidates, traj.contacts[f],
+        flat = traj.scene.dim == 2
+        structure = self.backend.structure() if flat else {}
+        shown = ("" if structure else " (structure not exposed by this backend)") if flat else \
+            " (spheres projected on the x-y plane)"
+        counts = draw_frame(fig, traj.positions[f][:, :2], traj.scene.radii, structure, candidates, traj.contacts[f],
                             must, f"{label}{shown}, frame {f}", alive=traj.alive_at(f), static=traj.scene.static)
         fig.axes[0].set_title(fig.axes[0].get_title() + f"\n{counts['candidates']} candidates, "
                               f"{counts['overlaps']} true overlaps found, {counts['missed']} missed", fontsize=9)
@@ -89,14 +92,14 @@ class Stepper:
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     params = parse_params(args.params)
-    names = matched_backends(args.backends)
+    scene = scene_from_args(args)
+    names = in_dimension(matched_backends(args.backends), scene.dim)
     backends = []
     try:
         for name in names:
             backends.append(engines.create(name, **params))
     except ValueError as exc:
         raise CliError(str(exc)) from None
-    scene = scene_from_args(args)
     traj = simulate(scene, max(args.frame + 1, args.animate or 1))
     with Output(args.out, "show", command_line("show", argv)) as out:
         for name, backend in zip(names, backends):

@@ -26,15 +26,16 @@ from matplotlib.lines import Line2D
 import engines
 from scenes import Scene, generate
 
-from .lib.cli import Parser, command_line, matched_backends, run_cli, warn_unavailable
+from .lib.cli import Parser, command_line, in_dimension, matched_backends, run_cli, warn_unavailable
 from .lib.figures import backend_colour, new_figure, pareto_front
 from .lib.harness import Job
-from .lib.options import (add_backends_option, add_output_options, add_quick_option, add_scene_file_option,
-                          add_trial_options, file_scene, parse_checked)
+from .lib.options import (add_backends_option, add_dim_option, add_output_options, add_quick_option,
+                          add_scene_file_option, add_trial_options, dim_of, file_scene, parse_checked)
 from .lib.output import Output, docs_folder, read_meta, write_json
 from .lib.pool import Pool
 from .lib.results import RowWriter, read_rows, summarise
 from .lib.runner import Runner
+from .lib.tuning import knobs_of
 
 ERROR_LEVELS = (0.0, 1e-6, 1e-4, 1e-2)  # of contact events: the frontier's table
 FAST_SPEED = 1200.0  # px/s: 2 radii per frame at 60 frames per second
@@ -42,23 +43,25 @@ FAR = 2.0**24  # about 1.7e7 (a 17 km world in millimetres): float32 steps there
 FAR_RADII = (5.0, 20.0)
 
 
-def scenes(quick: bool) -> dict[str, Scene]:
+def scenes(quick: bool, dim: int = 2) -> dict[str, Scene]:
     """The essay's scene; the same with fast motion (2 radii per frame), where skipping work per
-    frame loses contacts; and mixed radii 2^24 from the origin, where float32 loses them."""
+    frame loses contacts; and mixed radii 2^24 from the origin, where float32 loses them (circles,
+    or spheres at the same coverage of a cube)."""
     n = 256 if quick else 2048
-    essay = generate("uniform", n, seed=0, box=None)
+    essay = generate("uniform", n, seed=0, box=None, dim=dim)
     # Mixed radii: with the essay's equal radii (reach 20) on float32's 2-unit grid, rounding can
     # never carry a touching pair's gap past the reach, so the far scene would hide the loss.
-    mixed = generate("uniform", n, seed=0, radii=FAR_RADII, box=None)
+    mixed = generate("uniform", n, seed=0, radii=FAR_RADII, box=None, dim=dim)
     far = mixed.with_(positions=mixed.positions + FAR, box=tuple(np.add(mixed.box, FAR)), name=f"far-n{n}")
-    return {"essay": essay, "fast": generate("uniform", n, seed=0, speed=FAST_SPEED, box=None).with_(name=f"fast-n{n}"),
-            "far": far}
+    fast = generate("uniform", n, seed=0, speed=FAST_SPEED, box=None, dim=dim).with_(name=f"fast-n{n}")
+    return {"essay": essay, "fast": fast, "far": far}
 
 
 def settings(backend: str, scene: Scene) -> list[tuple[str, dict[str, Any]]]:
-    """(label, params): the defaults, then each knob's values one at a time."""
+    """(label, params): the defaults, then each knob's values one at a time (those that apply in
+    the scene's dimension)."""
     out = [("defaults", {})]
-    for knob in engines.backend_class(backend).sweeps:
+    for knob in knobs_of(backend, scene.dim):
         out += [(f"{knob.param}={v}", {knob.param: v}) for v in knob.values(scene)]
     return out
 
@@ -202,6 +205,7 @@ def report(lines: pd.DataFrame, meta: dict, folder: Path, figure_name: str) -> P
 def parser() -> Parser:
     p = Parser(prog="python -m studies.tradeoff", description=__doc__.split("\n\n")[0])
     add_backends_option(p)
+    add_dim_option(p)
     add_scene_file_option(p.add_argument_group("your scene, measured beside the study's own"))
     add_trial_options(p, frames=20, repeat=1, budget=0.05, timeout=120.0)
     add_quick_option(p, "n = 256, 5 frames", frames=5)
@@ -213,9 +217,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_checked(parser(), argv)
     if args.report_only:
         return finish(Path(args.out), read_meta(Path(args.out)), args)
-    chosen = matched_backends(args.backends)
     given = file_scene(args)  # checked before the output folder is touched
-    chosen_scenes = {**scenes(args.quick), **({"yours": given} if given is not None else {})}
+    dim = given.dim if given is not None else dim_of(args)
+    chosen = in_dimension(matched_backends(args.backends), dim)
+    chosen_scenes = {**scenes(args.quick, dim), **({"yours": given} if given is not None else {})}
     with Output(args.out, "tradeoff", command_line("tradeoff", argv), args.resume) as out:
         missing = warn_unavailable(chosen)
         backends = [b for b in chosen if b not in missing]
@@ -230,7 +235,7 @@ def main(argv: list[str] | None = None) -> int:
                                 for backend in backends for label, params in settings(backend, scene)],
                                desc=f"tradeoff {name}")
         writer.finish()
-        meta = out.meta(unavailable=missing, swept_contacts=swept,
+        meta = out.meta(unavailable=missing, swept_contacts=swept, dim=dim,
                         full=args.backends == "*" and not args.quick and given is None)
     return finish(out.path, meta, args)
 
@@ -238,7 +243,8 @@ def main(argv: list[str] | None = None) -> int:
 def finish(folder: Path, meta: dict, args) -> int:
     lines = measures(read_rows(folder)[0], meta)
     lines.to_csv(folder / "tradeoff.csv", index=False)
-    report_dir = Path(args.report_dir) if args.report_dir else (docs_folder() if meta.get("full") else folder)
+    report_dir = Path(args.report_dir) if args.report_dir else (docs_folder(meta.get("dim", 2)) if meta.get("full")
+                                                                else folder)
     report_dir.mkdir(parents=True, exist_ok=True)
     figure(lines, report_dir / "tradeoff.png")
     path = report(lines, meta, report_dir, "tradeoff.png")

@@ -34,7 +34,7 @@ from own.tree import REFIT_DRIFT
 from scenes import FAMILIES as RECORDED_FAMILIES
 from scenes import Scene, generate
 
-from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli, warn_unavailable
+from .lib.cli import CliError, Parser, command_line, in_dimension, matched_backends, run_cli, warn_unavailable
 from .lib.figures import new_figure, save
 from .lib.options import (add_backends_option, add_output_options, add_quick_option, add_scene_options,
                           add_trial_options, parse_checked, scene_from_args)
@@ -43,7 +43,7 @@ from .lib.pool import Pool
 from .lib.results import RowWriter, read_rows, stored_runs, summarise
 from .lib.runner import Runner
 from .lib.trials import run_trial, warm_up
-from .lib.tuning import Tuned, tunable, tune_backend
+from .lib.tuning import Tuned, knobs_of, tunable, tune_backend
 
 # The scene families the default rules are checked on (each at every n of FAMILY_SIZES).
 FAMILIES: dict[str, dict[str, Any]] = {
@@ -154,7 +154,7 @@ def run_tune(runner: Runner, scene: Scene, backends: list[str], args, exact_only
                              budget_s=args.budget, timeout_s=args.timeout,
                              tag={"experiment": step, "label": ", ".join(f"{k}={v}" for k, v in params.items())})
 
-        knobs = engines.backend_class(backend).sweeps
+        knobs = knobs_of(backend, scene.dim)
         if exact_only and backend in EXACT_KNOBS:
             knobs = tuple(k for k in knobs if k.param in EXACT_KNOBS[backend])
         tuned = tune_backend(scene, backend, measure, knobs)
@@ -323,6 +323,9 @@ def parse(argv: list[str] | None):
         raise CliError(f"--sizes must be a comma-separated list of integers, got {args.sizes!r}") from None
     if args.sizes and (args.scene or args.trajectory or min(args.sizes) < 2):
         raise CliError("--sizes needs a described scene (not --scene or --trajectory) and every n >= 2")
+    if args.families and args.dim == 3:
+        raise CliError("--families checks the defaults on the circle families (docs/TUNING.md); over spheres, tune "
+                       "a scene: --dim 3 with --n, --dist or --trajectory")
     return args
 
 
@@ -378,13 +381,13 @@ class Plan:
     def from_args(cls, args) -> "Plan":
         if args.families:
             return cls()
-        chosen = matched_backends(args.backends)
-        missing = warn_unavailable(chosen) if args.backends != "*" else {}  # "*": every one here with knobs
-        backends = tunable([b for b in chosen if b not in missing])
-        if not backends:
-            raise CliError(f"none of {args.backends!r} has parameters to tune; tunable: "
-                           f"{', '.join(tunable(engines.names()))}")
         base = scene_from_args(args)
+        chosen = in_dimension(matched_backends(args.backends), base.dim)
+        missing = warn_unavailable(chosen) if args.backends != "*" else {}  # "*": every one here with knobs
+        backends = tunable([b for b in chosen if b not in missing], base.dim)
+        if not backends:
+            raise CliError(f"none of {args.backends!r} has parameters to tune in {base.dim}D; tunable: "
+                           f"{', '.join(tunable(engines.names(), base.dim))}")
         scenes = [base if n == base.n else scene_from_args(argparse.Namespace(**{**vars(args), "n": n}))
                   for n in args.sizes or [base.n]]
         return cls(backends, missing, scenes)

@@ -16,6 +16,7 @@ from scenes.motion import simulate
 from studies import recommend
 from studies.lib.cli import run_cli
 from studies.recommend import Entry, rank, verdict
+from studies.lib import traits as recommend_traits
 from studies.lib.traits import measure_traits
 from studies.lib.trials import Trial
 
@@ -144,3 +145,23 @@ def test_bad_input_is_a_one_line_error(tmp_path, capsys):
     assert run_cli("recommend", recommend.main, ["--scene", str(bad), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert "bad.csv" in err and err.count("\n") == 1
+
+
+def test_a_recommendation_for_spheres_tries_only_what_works_in_3d(tmp_path, capsys):
+    assert recommend.main(["--n", "400", "--dim", "3", "--backends", "own.grid,own.quadtree,scipy.kdtree,box2d.v3",
+                           "--no-tune", "--time-limit", "20", "--frames", "2", "--repeat", "2",
+                           "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    assert "not run in 3D, they work in 2D only: own.quadtree, box2d.v3" in printed
+    assert "n = 400 spheres" in printed and "(by volume)" in printed and "resting contact" not in printed
+    meta = json.loads((tmp_path / "meta.json").read_text())
+    assert {e["backend"] for e in meta["entries"]} == {"own.grid", "scipy.kdtree"}
+    assert meta["traits"]["dim"] == 3 and 0.5 < meta["traits"]["concentration_z"] < 1.5
+
+
+def test_traits_of_spheres_see_clumping_along_z():
+    scene = generate("gauss_x", 3000, dim=3, box=(0, 0, 0, 800, 800, 800), seed=3)  # normal along x
+    along_z = scene.with_(positions=scene.positions[:, ::-1].copy(), velocities=scene.velocities[:, ::-1].copy())
+    traits = measure_traits(simulate(along_z, 2))
+    assert traits.concentration_z < recommend_traits.CONCENTRATED < traits.concentration_x
+    assert "clumped along z" in traits.words()

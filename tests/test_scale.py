@@ -94,7 +94,7 @@ def test_bench_quick_prints_the_targets_with_the_floor(tmp_path):
     assert table.startswith("Parallel variants run on") and "threading layer" in table.splitlines()[0]
     lines = [line.split() for line in table.splitlines()[2:]]
     assert [(line[0], line[1], line[2], line[4]) for line in lines] == [
-        ("2048", "uniform", family, "1") for family in ("own.grid", "own.sap", "own.quadtree")]
+        ("2048", "uniform", family, "1") for family in ("own.grid", "own.sap", "own.quadtree", "own.bvh", "own.verlet")]
     for line in lines:
         measured, floor, multiple, per_pair, median_pass = map(float, (line[5], line[8], line[9][:-1], line[10],
                                                                       line[11]))
@@ -147,3 +147,41 @@ def test_ours_against_the_fastest_neighbour_list_library():
     r = ours_against_engines_per_n(medians, "particle").iloc[0]
     # The engine is faster than ours here, but only the libraries of particle simulation count.
     assert (r.ours, r.engine, r.ratio) == ("own.sap", "vesin.cells", 1.0 / 0.2)
+
+
+def test_bench_over_spheres_sets_ours_against_the_rivals_in_the_harness(tmp_path):
+    done = subprocess.run([sys.executable, "-m", "studies.bench", "--dim", "3", "--quick", "--frames", "2",
+                           "--seconds", "0.05", "--backends", "scipy.kdtree,mujoco.sap,chipmunk.*", "--out",
+                           str(tmp_path)], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    ours = pd.read_csv(tmp_path / "bench.csv")
+    assert {"own.grid", "own.verlet", "own.grid_parallel"} <= set(ours.variant) and "own.quadtree" not in set(ours.variant)
+    assert (ours.measured_ms > 0).all() and "Targets" not in done.stdout  # no targets over spheres
+    rivals = pd.read_csv(tmp_path / "rivals.csv")
+    assert set(rivals.backend) >= {"scipy.kdtree", "mujoco.sap", "own.grid"} and not rivals.backend.str.startswith(
+        "chipmunk").any()
+    assert (rivals.dim == 3).all() and (rivals.missed == 0).all() and (rivals.status == "ok").all()
+    assert rivals.set_index("backend").engine_ms["mujoco.sap"] > 0  # MuJoCo times its own broad phase
+    verdicts = json.loads((tmp_path / "meta.json").read_text())["rivals"]
+    assert [v.split(":")[0].split("fastest ")[1] for v in verdicts] == ["engine", "library", "engine's own timer"]
+    for line in verdicts:
+        mine, rival = (float(part.split(" ms")[0].split()[-1]) for part in
+                       (line.split("ours ")[1], line.split(": ")[1].split(", ours")[0]))
+        assert float(line.split(": ")[-1].split("x")[0]) == pytest.approx(rival / mine, rel=0.05)
+
+
+def test_scale_keeps_the_spheres_section_of_its_report_and_replaces_it_from_a_3d_run(tmp_path):
+    from studies.scale import SPHERES_BEGIN, SPHERES_END, kept_section, with_section
+
+    flat = "# Speed and scale\n\ncircles\n"
+    section = f"{SPHERES_BEGIN}\n## Spheres (3D)\nrow 1\n{SPHERES_END}"
+    once = with_section(flat, section)
+    assert once.startswith(flat.rstrip("\n")) and once.rstrip().endswith(SPHERES_END)
+    newer = section.replace("row 1", "row 2")
+    assert with_section(once, newer) == once.replace("row 1", "row 2")  # replaced in place, nothing else touched
+    assert with_section(with_section(flat, section), section) == once
+    report = tmp_path / "SCALE.md"
+    report.write_text(once)
+    assert kept_section(report) == section  # what a 2D run's report carries over
+    report.write_text(flat)
+    assert kept_section(report) == "" and kept_section(tmp_path / "none.md") == ""

@@ -15,7 +15,7 @@ import engines
 from engines.pairs import keys
 from own.brute import brute_pairs
 from scenes.motion import simulate
-from scenes.stress import STRESS_SCENES
+from scenes.stress import STRESS_SCENES, stress_scenes
 from strategies import BAD_SCENE_FILES
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -52,9 +52,10 @@ def test_touching_lattices_touch_exactly():
     assert (np.hypot(*(compressed.positions[p[:, 1]] - compressed.positions[p[:, 0]]).T) < 1.0).sum() > square.n
 
 
+@pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("backend", ["own.grid_swept", "own.sap_swept"])
-def test_swept_boxes_catch_every_tunneling_pair(backend):
-    traj = simulate(STRESS_SCENES["fast_movers"](), 12)
+def test_swept_boxes_catch_every_tunneling_pair(backend, dim):
+    traj = simulate(stress_scenes(dim)["fast_movers"](), 12)
     n = traj.scene.n
     b = engines.create(backend)
     b.reset(traj.positions[0], traj.scene.radii)
@@ -130,3 +131,52 @@ def test_stress_rejects_bad_scene_files(tmp_path, text, message):
     assert result.returncode == 2 and re.search(message, result.stderr) and str(bad) in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "never").exists()
+
+
+SPHERE_EXACT = [name for name in EXACT if 3 in engines.backend_class(name).dims] + ["own.verlet"]
+
+
+@pytest.fixture(scope="module")
+def sphere_stress_trajectories():
+    return {name: simulate(make(), 3) for name, make in stress_scenes(3).items()}
+
+
+def test_the_stress_scenes_over_spheres_are_the_same_set_in_3d(sphere_stress_trajectories):
+    assert set(sphere_stress_trajectories) == set(STRESS_SCENES) | {"line_depth"}
+    for name, traj in sphere_stress_trajectories.items():
+        assert traj.positions.shape[2] == 3 and len(traj.scene.box) == 6, name
+    cube = sphere_stress_trajectories["lattice_square"]
+    pairs = brute_pairs(cube.positions[0], cube.scene.radii)
+    d = np.linalg.norm(cube.positions[0][pairs[:, 1]] - cube.positions[0][pairs[:, 0]], axis=1)
+    # Boxes meet exactly at faces, edges and corners: distances 1, sqrt(2), sqrt(3), no more.
+    assert set(np.round(d**2, 12)) == {1.0, 2.0, 3.0}
+    points = {tuple(p) for p in cube.positions[0].astype(int).tolist()}
+    faces = sum((x + dx, y + dy, z + dz) in points for x, y, z in points for dx, dy, dz in np.eye(3, dtype=int).tolist())
+    assert (d == 1.0).sum() == faces > 2 * 1024
+    assert np.ptp(sphere_stress_trajectories["line_depth"].positions[0], axis=0)[2] > 1000
+
+
+@pytest.mark.parametrize("backend", SPHERE_EXACT)
+def test_our_3d_backends_are_exact_on_every_stress_scene_over_spheres(backend, sphere_stress_trajectories):
+    for name, traj in sphere_stress_trajectories.items():
+        b = engines.create(backend)
+        b.reset(traj.positions[0], traj.scene.radii)
+        for f, frame in enumerate(traj.positions):
+            b.update(frame)
+            got = b.pairs()
+            b.validate()
+            n = traj.scene.n
+            assert np.array_equal(np.sort(keys(got, n)), keys(brute_pairs(frame, traj.scene.radii), n)), (name, f)
+
+
+def test_stress_study_over_spheres(tmp_path):
+    out = tmp_path / "stress"
+    result = run_stress("--quick", "--dim", "3", "--backends", "own.grid,own.grid_swept,chipmunk.bbtree", "--scenes",
+                        "line_depth,fast_movers", "--max-n", "1024", "--out", str(out))
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert "not run in 3D, they work in 2D only: chipmunk.bbtree" in result.stdout
+    outcomes = pd.read_csv(out / "outcomes.csv").set_index(["scene", "backend"])
+    assert set(outcomes.index) == {(s, b) for s in ("line_depth", "fast_movers") for b in ("own.grid", "own.grid_swept")}
+    assert outcomes.loc[("line_depth", "own.grid"), "outcome"] == "exact"
+    assert outcomes.loc[("fast_movers", "own.grid_swept"), "tunneled"] == 0
+    assert "(spheres)" in (out / "STRESS.md").read_text().splitlines()[0]

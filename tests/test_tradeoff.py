@@ -81,3 +81,13 @@ def test_tradeoff_study_quick_shows_a_trade_off_per_approximate_knob(tmp_path, c
     assert "| error at most | setting | ms per frame | its error |" in report and "Pareto frontier" in report
     assert (out / "tradeoff.png").stat().st_size > 10_000
     assert "the fastest setting at each error level" in capsys.readouterr().out
+
+
+def test_the_tradeoff_scenes_over_spheres_keep_their_roles():
+    scenes = tradeoff.scenes(quick=True, dim=3)
+    assert all(s.dim == 3 and len(s.box) == 6 for s in scenes.values())
+    far, essay = scenes["far"], scenes["essay"]
+    assert far.positions.min() > tradeoff.FAR - 1 and essay.positions.max() < 1e4
+    np.testing.assert_allclose(np.linalg.norm(scenes["fast"].velocities, axis=1), tradeoff.FAST_SPEED)
+    labels = [label for label, _ in tradeoff.settings("own.sap", essay)]
+    assert "axis=z" in labels and not any(label.startswith("strips") for label in labels)

@@ -181,3 +181,23 @@ def test_no_thread_pool_is_forked_into_the_trials(tmp_path):
                           text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "Numba" not in done.stderr and "fork" not in done.stderr, done.stderr[-2000:]
+
+
+def test_tuning_over_spheres_sweeps_the_knobs_that_apply_in_3d(tmp_path):
+    done = subprocess.run([sys.executable, "-m", "studies.tune", "--quick", "--dim", "3", "--n", "400", "--backends",
+                           "own.sap,own.grid,chipmunk.hash", "--out", str(tmp_path)], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "not run in 3D, they work in 2D only: chipmunk.hash" in done.stdout
+    points = pd.read_csv(tmp_path / "tune.csv")
+    assert set(points.backend) == {"own.sap"}  # own.grid's cell is a knob of circles only
+    axes = set(points[points.param == "axis"].value)
+    assert axes == {"x", "y", "z", "auto"} and set(points.param) <= {"axis", "best", "default"}
+    assert (points.missed == 0).all()
+
+
+def test_tune_families_are_circles_only(capsys, tmp_path):
+    from studies.lib.cli import run_cli
+
+    assert run_cli("tune", tune.main, ["--families", "--dim", "3", "--out", str(tmp_path)]) == 2
+    assert "--families checks the defaults on the circle families" in capsys.readouterr().err

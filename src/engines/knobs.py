@@ -31,6 +31,9 @@ class Knob:
     # in about 40 frames of the essay's motion at its default skin), and a shorter trial, which
     # starts from a structure built untimed, would favour the setting that just outlives it.
     trial_frames: int = 1
+    # The dimensions the knob applies in (a grid's cell over circles only, a third sweep axis over
+    # spheres only): a sweep on a scene of another dimension leaves it out.
+    dims: tuple[int, ...] = (2, 3)
 
 
 def frames_needed(knobs: tuple[Knob, ...], params: dict[str, Any]) -> int:

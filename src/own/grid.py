@@ -472,7 +472,7 @@ def default_cell(radii: np.ndarray) -> float:
 # The cell sizes a tuning sweep tries, as multiples of the default cell (docs/TUNING.md).
 GRID_CELL_FACTORS = (0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 3.0, 4.0, 6.0)
 GRID_CELL = Knob("cell", sizes(lambda s: default_cell(s.radii) or mean_diameter(s), GRID_CELL_FACTORS),
-                 "requested cell size")
+                 "requested cell size", dims=(2,))
 
 
 class CellLayout(SmallScenes, BroadPhase):

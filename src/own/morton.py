@@ -31,3 +31,47 @@ def interleave(qx, qy) -> np.uint64:
 def bit_length(v) -> int:
     """Number of bits of v (0 for 0): one instruction, where a shifting loop takes up to 64 steps."""
     return 64 - leading_zeros(np.uint64(v))
+
+
+@nb.njit(cache=True, inline="always")
+def _spread3(v: np.uint64) -> np.uint64:
+    """The 21 low bits of v moved to every third bit position (0, 3, 6, ...)."""
+    v &= np.uint64(0x1FFFFF)
+    v = (v | (v << np.uint64(32))) & np.uint64(0x1F00000000FFFF)
+    v = (v | (v << np.uint64(16))) & np.uint64(0x1F0000FF0000FF)
+    v = (v | (v << np.uint64(8))) & np.uint64(0x100F00F00F00F00F)
+    v = (v | (v << np.uint64(4))) & np.uint64(0x10C30C30C30C30C3)
+    v = (v | (v << np.uint64(2))) & np.uint64(0x1249249249249249)
+    return v
+
+
+@nb.njit(cache=True, inline="always")
+def interleave3(qx, qy, qz) -> np.uint64:
+    """Morton code of lattice point (qx, qy, qz), each below 2^21: x in bits 0, 3, 6, ..., y in
+    1, 4, 7, ..., z in 2, 5, 8, ... (the order of an octree's pre-order traversal)."""
+    return _spread3(np.uint64(qx)) | (_spread3(np.uint64(qy)) << np.uint64(1)) | (_spread3(np.uint64(qz)) << np.uint64(2))
+
+
+@nb.njit(cache=True)
+def morton_codes3(positions, bits):
+    """Morton code of each centre of (n, 3) `positions` on the 2^bits lattice (bits <= 21) over the
+    cube around the centres; all 0 where the cube is a point or its scale overflows."""
+    n = positions.shape[0]
+    codes = np.zeros(n, dtype=np.uint64)
+    if n == 0:
+        return codes
+    lo, hi = positions[0].copy(), positions[0].copy()
+    for i in range(n):
+        for a in range(3):
+            lo[a], hi[a] = min(lo[a], positions[i, a]), max(hi[a], positions[i, a])
+    size = max(0.5 * hi[0] - 0.5 * lo[0], 0.5 * hi[1] - 0.5 * lo[1], 0.5 * hi[2] - 0.5 * lo[2])
+    top = float((1 << bits) - 1)
+    scale = 0.5 * (top + 1.0) / size if size > 0 else 0.0
+    if not (scale > 0 and np.isfinite(scale)):
+        return codes
+    for i in range(n):
+        qx = np.int64(min(max((positions[i, 0] - lo[0]) * scale, 0.0), top))
+        qy = np.int64(min(max((positions[i, 1] - lo[1]) * scale, 0.0), top))
+        qz = np.int64(min(max((positions[i, 2] - lo[2]) * scale, 0.0), top))
+        codes[i] = interleave3(qx, qy, qz)
+    return codes

@@ -16,7 +16,7 @@ from .small import SmallScenes
 from .statics import StaticsApart
 from .strips import strip_plan, strip_prepare, strip_sweep, strip_sweep_parallel
 
-AXES = ("x", "y", "auto")
+AXES = ("x", "y", "auto", "z")  # "z": spheres only
 SWEEPS = ("auto", "plain", "sparse")
 STRIPS = ("auto", "on", "off")
 # An insertion-sort repair that needs more swaps than this many per object gives up and sorts
@@ -267,7 +267,7 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
     overlaps: on a dense scene the plain sweep tests O(sqrt(n)) pairs per object, the strips a few.
     A strip sweep's "auto" axis is the one along which the boxes extend further.
 
-    Spheres (positions (n, 3)): the plain sweep in 3D, along x, y, or with "auto" the one of the
+    Spheres (positions (n, 3)): the plain sweep in 3D, along x, y, z, or with "auto" the one of the
     three along which the centres vary most, repaired between frames where incremental
     (own/sap3d.py); strips "on", the sparse sweep and the parallel sweep are not taken there yet.
     """
@@ -276,9 +276,10 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
     method = "sweep"
     dims = (2, 3)
     _sweep3: Sweep3 | None = None  # the state over spheres
-    sweeps = (Knob("axis", fixed(["x", "y", "auto"]), "sweep axis"),
-              Knob("sweep", fixed(["plain", "sparse", "auto"]), "sweep"),
-              Knob("strips", fixed(["on", "off", "auto"]), "strips"))
+    sweeps = (Knob("axis", fixed(["x", "y", "auto"]), "sweep axis", dims=(2,)),
+              Knob("axis", fixed(["x", "y", "z", "auto"]), "sweep axis", dims=(3,)),
+              Knob("sweep", fixed(["plain", "sparse", "auto"]), "sweep", dims=(2,)),
+              Knob("strips", fixed(["on", "off", "auto"]), "strips", dims=(2,)))
     defaults = {"axis": "auto", "incremental": False, "sweep": "auto", "strips": "auto", "parallel": False,
                 "parallel_from": PARALLEL_FROM_OVERLAPS}
 
@@ -302,6 +303,8 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
             self._sweep3 = Sweep3(radii, self.params["axis"], self._incremental)
             self._update(positions)
             return
+        if self.params["axis"] == "z":
+            raise ValueError(f"{self.name}: axis 'z' is for spheres; circles are swept along x, y or 'auto'")
         n = self.n
         # The last scene's counts are no guide to this one.
         self._last_pairs, self._last_overlaps, self._float32_too_coarse = None, 0, False

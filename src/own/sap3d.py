@@ -92,7 +92,7 @@ class Sweep3:
         if self.axis_mode == "auto":
             axis = most_varied_axis(positions)
         else:
-            axis = "xy".index(self.axis_mode)
+            axis = "xyz".index(self.axis_mode)
         repair = self.incremental and axis == self.axis and len(positions) > 0 and self.order[0] >= 0
         self.swaps = sweep3_prepare(positions, self.radii, axis, self.order, repair, self.spare, self.keys, self.perm,
                                     self.boxes)

@@ -44,6 +44,7 @@ class SweptGrid(_Swept):
 
     name = "own.grid_swept"
     inner = "own.grid"
+    dims = (2, 3)  # own.grid's: swept boxes of spheres are cubes too
 
 
 class SweptSap(_Swept):
@@ -51,3 +52,4 @@ class SweptSap(_Swept):
 
     name = "own.sap_swept"
     inner = "own.sap"
+    dims = (2, 3)

@@ -33,20 +33,24 @@ def packages() -> list[str]:
     return CORE_PACKAGES + [p for f in FAMILIES.values() for p in f.packages if p not in CORE_PACKAGES]
 
 
-def docs_folder() -> Path:
-    """The repository's docs/ (where full runs write their reports), or ./docs outside a checkout."""
+def docs_folder(dim: int = 2) -> Path:
+    """The repository's docs/ (where full runs write their reports), or ./docs outside a checkout;
+    docs/3d/ for the reports of runs over spheres."""
     root = Path(__file__).resolve().parents[2]
-    return root / "docs" if (root / "pyproject.toml").exists() else Path("docs")
+    docs = root / "docs" if (root / "pyproject.toml").exists() else Path("docs")
+    return docs if dim == 2 else docs / "3d"
 
 
 def report_folder(args, out: Path, meta: dict[str, Any] | None = None) -> Path:
-    """Where a study's report goes: --report-dir, else docs/ for a full run, else the run's own
-    folder. Whether the run was full comes from `meta` (its meta.json) where given, never from the
-    options of a report command: a quick or narrowed run's report must not replace the one in docs/."""
+    """Where a study's report goes: --report-dir, else docs/ for a full run (docs/3d/ over
+    spheres), else the run's own folder. Whether the run was full, and its dimension, come from
+    `meta` (its meta.json) where given, never from the options of a report command: a quick or
+    narrowed run's report must not replace the one in docs/."""
     if getattr(args, "report_dir", None):
         return Path(args.report_dir)
     full = meta.get("full", not args.quick) if meta else not args.quick
-    return docs_folder() if full else Path(out)
+    dim = meta.get("dim", 2) if meta else (getattr(args, "dim", None) or 2)
+    return docs_folder(dim) if full else Path(out)
 
 
 def cpu_model() -> str:

@@ -37,6 +37,8 @@ class Traits:
     spawn_rate: float = 0.0  # objects appearing or going per frame, over n
     resting_share: float = 0.0  # of the moving objects, those touching another under RESTING radii per frame
     fast_share: float = 0.0  # of the moving objects, those over one radius per frame
+    concentration_z: float = 1.0  # spheres: as x and y (circles: 1)
+    dim: int = 2
 
     def recorded_words(self) -> list[str]:
         """The traits of a recorded scene that decide between broad phases, in plain words."""
@@ -54,12 +56,13 @@ class Traits:
 
     def words(self) -> list[str]:
         """Short phrases, the ones that matter first."""
-        out = [f"n = {self.n:,}" + (" (large)" if self.n >= LARGE_N else "")]
+        out = [f"n = {self.n:,}" + (" (large)" if self.n >= LARGE_N else "") + (" spheres" if self.dim == 3 else "")]
         if self.radius_spread >= WIDE_SPREAD:
             out.append(f"radii spread {self.radius_spread:.0f}:1")
         else:
             out.append("similar sizes" + (f" (radii spread {self.radius_spread:.1f}:1)" if self.radius_spread > 1.01 else ""))
-        along = [a for a, c in (("x", self.concentration_x), ("y", self.concentration_y)) if c < CONCENTRATED]
+        along = [a for a, c in (("x", self.concentration_x), ("y", self.concentration_y), ("z", self.concentration_z))
+                 if c < CONCENTRATED]
         if len(along) == 1:
             out.append(f"clumped along {along[0]}")
         elif self.dispersion >= CLUMPED:
@@ -70,25 +73,26 @@ class Traits:
             out.append(f"fast motion ({self.step_in_radii:.2g} radii per frame)")
         else:
             out.append(f"coherent motion ({self.step_in_radii:.2g} radii per frame)")
-        out.append(f"the objects' boxes cover {self.coverage:.0%} of the scene's box")
+        out.append(f"the objects' boxes cover {self.coverage:.0%} of the scene's box"
+                   + (" (by volume)" if self.dim == 3 else ""))
         return out + self.recorded_words()
 
 
 def measure_traits(traj: Trajectory) -> Traits:
     pos, radii = traj.positions[0], traj.scene.radii
-    n = len(radii)
+    n, dim = pos.shape
     positive = radii[radii > 0]
     spread = float(positive.max() / positive.min()) if len(positive) else 1.0
-    lo, hi = pos.min(axis=0) if n else np.zeros(2), pos.max(axis=0) if n else np.ones(2)
+    lo, hi = pos.min(axis=0) if n else np.zeros(dim), pos.max(axis=0) if n else np.ones(dim)
     # Positions as shares of the extent, computed in halves: coordinates near the largest double
     # would overflow a difference of them.
     half = np.maximum(0.5 * hi - 0.5 * lo, 1e-300)
-    unit = np.clip((0.5 * pos - 0.5 * lo) / half, 0.0, 1.0) if n else np.zeros((0, 2))
-    side = max(1, int(np.sqrt(n / 4)))
+    unit = np.clip((0.5 * pos - 0.5 * lo) / half, 0.0, 1.0) if n else np.zeros((0, dim))
+    side = max(1, int((n / 4) ** (1.0 / dim)))  # about 4 objects a cell (square or cube)
     cells = np.minimum((unit * side).astype(np.int64), side - 1)
-    counts = np.bincount(cells[:, 1] * side + cells[:, 0], minlength=side * side) if n else np.zeros(1)
+    counts = np.bincount(np.ravel_multi_index(cells.T, (side,) * dim), minlength=side**dim) if n else np.zeros(1)
     dispersion = float(counts.var() / counts.mean()) if n else 1.0
-    conc = unit.std(axis=0) * np.sqrt(12) if n > 1 else np.ones(2)  # std against a uniform placement's
+    conc = unit.std(axis=0) * np.sqrt(12) if n > 1 else np.ones(dim)  # std against a uniform placement's
     steps = (np.abs(np.diff(0.5 * traj.positions, axis=0)).max(axis=2) * 2.0 if traj.frames > 1
              else np.zeros((1, n)))
     # Only movers alive in both frames of a step count: a parked or static object is no motion.
@@ -107,10 +111,14 @@ def measure_traits(traj: Trajectory) -> Traits:
     if first is not None and len(first):
         touching[np.asarray(first).ravel()] = True
     in_contact = np.broadcast_to(touching, steps.shape)[moving]
-    resting = float(((in_radii < RESTING) & in_contact).mean()) if in_radii.size else 0.0
-    fast = float((in_radii > 1.0).mean()) if in_radii.size else 0.0
+    # Traits of recorded motion only: the essay's objects are all slow or all fast, and at its
+    # coverage half of them touch another now and then (57% of the spheres of the 3D scene), which
+    # is no resting contact.
+    recorded = traj.scene.motion is not None and in_radii.size
+    resting = float(((in_radii < RESTING) & in_contact).mean()) if recorded else 0.0
+    fast = float((in_radii > 1.0).mean()) if recorded else 0.0
     spawns = float(np.abs(np.diff(alive.astype(np.int8), axis=0)).sum() / ((traj.frames - 1) * n)) \
         if traj.alive is not None and traj.frames > 1 and n else 0.0
     covered = coverage(radii, traj.scene.box)
     return Traits(n, spread, dispersion, float(conc[0]), float(conc[1]), step, covered,
-                  traj.scene.static_share, spawns, resting, fast)
+                  traj.scene.static_share, spawns, resting, fast, float(conc[2]) if dim == 3 else 1.0, dim)

@@ -66,10 +66,16 @@ class Tuned:
 Measure = Callable[[dict[str, Any], str], Trial]
 
 
-def tunable(names: list[str]) -> list[str]:
-    """The backends among `names` that have knobs to sweep (the unavailable ones are left out)."""
+def knobs_of(backend: str, dim: int = 2) -> tuple[Knob, ...]:
+    """The backend's knobs that apply in `dim` dimensions."""
+    return tuple(k for k in engines.backend_class(backend).sweeps if dim in k.dims)
+
+
+def tunable(names: list[str], dim: int = 2) -> list[str]:
+    """The backends among `names` that work in `dim` dimensions and have knobs to sweep there (the
+    unavailable ones are left out)."""
     here = set(engines.available())
-    return [n for n in names if n in here and engines.backend_class(n).sweeps]
+    return [n for n in names if n in here and engines.works_in(n, dim) and knobs_of(n, dim)]
 
 
 def tune_backend(scene: Scene, backend: str, measure: Measure, knobs: tuple[Knob, ...] | None = None,
@@ -81,7 +87,9 @@ def tune_backend(scene: Scene, backend: str, measure: Measure, knobs: tuple[Knob
     params: dict[str, Any] = {}
     sweeps = []
     best: Trial | None = None
-    for knob in engines.backend_class(backend).sweeps if knobs is None else knobs:
+    for knob in knobs_of(backend, scene.dim) if knobs is None else knobs:
+        if scene.dim not in knob.dims:
+            continue
         points = []
         for value in knob.values(scene):
             if knob.period and max_period is not None and value > max_period:
