@@ -126,7 +126,7 @@ def test_user_scene_file_and_backend_patterns(tmp_path):
         (["--frames", "0"], "--frames must be at least 1"),
         (["--scene", "/nonexistent/scene.csv"], "no such file"),
         (["--dim", "4"], "invalid choice: 4"),
-        (["--dist", "pile", "--dim", "3"], "a 2D engine: it has no 3D scene yet"),
+        (["--dist", "smash", "--dim", "3"], "over spheres the families are pile, rain, tumbler"),
     ],
 )
 def test_bad_options_give_one_line_and_status_2(args, message, capsys, tmp_path):

@@ -13,6 +13,7 @@ import pytest
 
 from scenes import FAMILIES, generate
 from scenes.families import TRAITS, FamilyMotion, cache_dir
+from scenes.families3d import FAMILIES_3D
 from scenes.motion import simulate
 from scenes.recorded import TrajectoryFileError, load_trajectory, save_trajectory
 from studies import compare, recommend, scenes as scenes_study
@@ -140,6 +141,38 @@ def test_each_family_is_recorded_once_and_read_back_the_same(family):
         assert counts.min() < scene.n
     if family == "smash":
         assert scene.radii.max() >= 10 * np.median(scene.radii)
+
+
+@pytest.mark.parametrize("family", FAMILIES_3D)
+def test_each_sphere_family_is_recorded_with_bullet_and_keeps_its_trait(family):
+    scene = generate(family, 300, seed=5, dim=3)
+    first = simulate(scene, 8)
+    assert scene.dim == 3 and len(scene.box) == 6 and first.positions.shape == (8, 300, 3)
+    assert scene.motion.stem.startswith(f"{family}-3d-") and "pybullet" in scene.motion.record(1).source
+    again = simulate(generate(family, 300, seed=5, dim=3), 8)
+    assert np.array_equal(first.positions, again.positions)  # read back from the cache
+    alive = first.alive if first.alive is not None else np.ones(first.positions.shape[:2], bool)
+    moving = alive[1:] & alive[:-1]
+    if scene.static is not None:
+        moving &= ~scene.static
+    step = np.abs(np.diff(first.positions, axis=0)).max(axis=2)[moving]
+    assert (step < 100).all(), "no object jumps across the scene between frames"
+    low, high = np.array(scene.box[:3]), np.array(scene.box[3:])
+    inside = first.positions[0][alive[0]]
+    assert ((inside > low - 20) & (inside < high + 20)).all(), "the objects stay in their container"
+    assert len(first.contacts[0]) > 100  # they touch: resting contact, a floor, a turning drum
+    if family == "pile":
+        assert np.median(step) < 0.1 * np.median(scene.radii)  # resting, jittering
+    if family == "rain":
+        assert scene.static_share == 0.25 and (np.diff(first.alive.astype(int), axis=0) != 0).any()
+    if family == "tumbler":
+        assert np.median(step) > 0.05 * np.median(scene.radii)  # everything moves
+
+
+def test_the_circle_only_families_are_refused_over_spheres():
+    for family in set(FAMILIES) - set(FAMILIES_3D):
+        with pytest.raises(ValueError, match=f"the {family} family is a scene of circles"):
+            generate(family, 100, dim=3)
 
 
 def test_a_family_recorded_longer_on_demand_keeps_its_first_frames():

@@ -15,7 +15,8 @@ Each family has a trait the essay's motion lacks (recommend names them; `TRAITS`
 
 Frame 0 is taken after a warm-up (the pile has landed, rain is at its steady state); every
 recorded frame is one 1/60 s step of the simulation (two substeps). pymunk is deterministic for
-the same calls, and the cached file is what every later run reads.
+the same calls, and the cached file is what every later run reads. Over spheres (`dim=3`) the
+pile, rain and the tumbler are recorded with Bullet instead (scenes/families3d.py).
 """
 
 from __future__ import annotations
@@ -29,6 +30,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from .families3d import FAMILIES_3D, RECIPES_3D
+from .families3d import layout as layout_3d
 from .recorded import Recording, fill_absent
 from .scene import Scene, check_box, shown
 
@@ -66,10 +69,16 @@ class FamilyMotion:
     n: int
     seed: int
     radii: tuple[float, float]
+    dim: int = 2
 
     @property
     def stem(self) -> str:
-        return f"{self.family}-v{VERSION}-n{self.n}-s{self.seed}-r{self.radii[0]:g}-{self.radii[1]:g}"
+        spheres = "" if self.dim == 2 else f"-{self.dim}d"
+        return f"{self.family}{spheres}-v{VERSION}-n{self.n}-s{self.seed}-r{self.radii[0]:g}-{self.radii[1]:g}"
+
+    @property
+    def engine(self) -> str:
+        return "pymunk" if self.dim == 2 else "pybullet"
 
     def digest(self) -> str:
         return self.stem
@@ -87,13 +96,14 @@ class FamilyMotion:
                 with np.load(path) as data:
                     alive = data["alive"] if "alive" in data.files else None
                     return Recording(data["positions"][:frames], None if alive is None else alive[:frames],
-                                     f"pymunk {self.family}")
+                                     f"{self.engine} {self.family}")
             except (OSError, ValueError, KeyError):
                 path.unlink(missing_ok=True)  # a torn file: record again
         return self._simulate(max(frames, FIRST_FRAMES)).record(frames)
 
     def _simulate(self, frames: int) -> Recording:
-        fields = RECIPES[self.family](self.n, np.random.default_rng(self.seed), self.radii, frames)
+        recipes = RECIPES if self.dim == 2 else RECIPES_3D
+        fields = recipes[self.family](self.n, np.random.default_rng(self.seed), self.radii, frames)
         folder = cache_dir()
         folder.mkdir(parents=True, exist_ok=True)
         path = folder / f"{self.stem}-f{frames}.npz"
@@ -105,7 +115,7 @@ class FamilyMotion:
             os.replace(tmp, path)
         finally:
             Path(tmp).unlink(missing_ok=True)
-        return Recording(fields["positions"], fields.get("alive"), f"pymunk {self.family}")
+        return Recording(fields["positions"], fields.get("alive"), f"{self.engine} {self.family}")
 
 
 def _frames_of(path: Path) -> int:
@@ -117,20 +127,20 @@ def family_scene(family: str, n: int, seed: int = 0, radii: tuple[float, float] 
     """A scene of `family` with n objects (slots, for rain), circles of radii uniform in `radii`."""
     if family not in FAMILIES:
         raise ValueError(f"unknown family {family!r}; choose one of {', '.join(FAMILIES)}")
-    if dim != 2:
-        raise ValueError(f"the {family} family is recorded with pymunk, a 2D engine: it has no {dim}D scene yet "
-                         "(in 3D: the essay's distributions, or your own trajectory file with a z column)")
+    if dim == 3 and family not in FAMILIES_3D:
+        raise ValueError(f"the {family} family is a scene of circles; over spheres the families are "
+                         f"{', '.join(FAMILIES_3D)} (or your own trajectory file with a z column)")
     if int(n) != n or n < 2:
         raise ValueError(f"a {family} scene needs n >= 2 objects, got {shown(n)}")
     lo, hi = (float(v) for v in (radii or DEFAULT_RADII))
     if not (0 < lo <= hi and math.isfinite(hi)):
         raise ValueError(f"radii bounds must satisfy 0 < min <= max, got {shown(radii)}")
-    motion = FamilyMotion(family, int(n), int(seed), (lo, hi))
+    motion = FamilyMotion(family, int(n), int(seed), (lo, hi), dim)
     record = motion.record(FIRST_FRAMES)
-    fields = _layout(family, int(n), np.random.default_rng(seed), (lo, hi))
-    return Scene(record.positions[0], fields["radii"], np.zeros((int(n), 2)), box=check_box(fields["box"]),
-                 name=f"{family}-n{n}-r{lo:g}-{hi:g}-s{seed}", walls=False, responds=False, static=fields["static"],
-                 motion=motion, meta={"dist": family, "seed": seed, "speed": ""})
+    fields = (_layout if dim == 2 else layout_3d)(family, int(n), np.random.default_rng(seed), (lo, hi))
+    return Scene(record.positions[0], fields["radii"], np.zeros((int(n), dim)), box=check_box(fields["box"], dim),
+                 name=f"{family}-n{n}-r{lo:g}-{hi:g}-s{seed}" + ("" if dim == 2 else f"-{dim}d"), walls=False,
+                 responds=False, static=fields["static"], motion=motion, meta={"dist": family, "seed": seed, "speed": ""})
 
 
 # ---- the recipes: layout (radii, box, who is static) and the simulation --------------------------
