@@ -11,6 +11,9 @@ differs within its range turns from 0 to 1 (in the middle when all codes are equ
 of at most `leaf_size` objects are leaves. Node boxes are the exact float64 union of their
 objects' boxes, and pairs are found by traversing the tree against itself (own/tree.py). Unlike
 a grid, nothing depends on a cell size: mixed sizes cost little.
+
+Over spheres the centres are quantised to a 2^16 lattice on each axis of a cube and their three
+coordinates interleaved into 48-bit codes; the radix tree over them is the same (own/tree3d.py).
 """
 
 from __future__ import annotations
@@ -21,10 +24,11 @@ import numpy as np
 from engines.knobs import Knob, fixed
 
 from .coherent import box_frame
-from .morton import interleave
+from .morton import interleave, interleave3
 from .small import SmallScenes
 from .statics import StaticsApart
 from .tree import END, START, MortonTree, add_children, new_table, split_at_highest_bit, tree_builder
+from .tree3d import tree_builder3
 
 MORTON_BITS = 16  # per axis: 2^16 lattice steps over the lattice square
 
@@ -86,6 +90,26 @@ def bvh_nodes(codes, depth, leaf_size):
 bvh_build = tree_builder(centre_codes, bvh_nodes)
 
 
+@nb.njit(cache=True)
+def centre_codes3(xyz, sr, x0, y0, z0, size, depth, codes):
+    """centre_codes over spheres: the Morton code of each centre on the 2^depth lattice over the
+    cube (x0, y0, z0, size), three coordinates interleaved (depth <= 21); all 0 where the cube is a
+    point or its scale overflows."""
+    top = float((1 << depth) - 1)
+    scale = (top + 1.0) / size if size > 0 else 0.0
+    if not (scale > 0 and np.isfinite(scale)):
+        codes[:] = 0
+        return
+    for i in range(xyz.shape[0]):
+        qx = np.int64(min(max((xyz[i, 0] - x0) * scale, 0.0), top))
+        qy = np.int64(min(max((xyz[i, 1] - y0) * scale, 0.0), top))
+        qz = np.int64(min(max((xyz[i, 2] - z0) * scale, 0.0), top))
+        codes[i] = interleave3(qx, qy, qz)
+
+
+bvh_build3 = tree_builder3(centre_codes3, bvh_nodes)
+
+
 class LinearBvh(StaticsApart, SmallScenes, MortonTree):
     """Linear BVH over Morton-sorted centres, built again past its skin (refitted in between where
     everything moves, own/tree.py); at most `leaf_size` objects per
@@ -96,9 +120,11 @@ class LinearBvh(StaticsApart, SmallScenes, MortonTree):
 
     name = "own.bvh"
     method = "tree"
+    dims = (2, 3)
     defaults = {"leaf_size": 16, "coherent": True}
     sweeps = (Knob("leaf_size", fixed([1, 2, 4, 8, 16, 32]), "objects per leaf"),)
     build = staticmethod(bvh_build)
+    build3 = staticmethod(bvh_build3)
 
     def __init__(self, **params):
         super().__init__(**params)

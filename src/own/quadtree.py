@@ -29,10 +29,11 @@ import numpy as np
 
 from engines.knobs import Knob, fixed
 
-from .morton import bit_length, interleave
+from .morton import bit_length, interleave, interleave3
 from .small import SmallScenes
 from .statics import StaticsApart
 from .tree import END, START, MortonTree, add_children, new_table, split_at_highest_bit, tree_builder
+from .tree3d import tree_builder3
 
 # Keys are (Morton code of the cell, padded to depth D) << LEVEL_BITS | depth: 2 D + 5 bits.
 LEVEL_BITS = 5
@@ -68,41 +69,85 @@ def quadtree_keys(xy, sr, x0, y0, size, depth, keys):
         keys[a] = (interleave(qx, qy) << np.uint64(LEVEL_BITS)) | level
 
 
-@nb.njit(cache=True)
-def quadtree_nodes(keys, depth, capacity):
-    """The node table over the sorted keys, depth first (a node kernel of own/tree.py)."""
-    n = keys.shape[0]
-    nodes = new_table(n)
-    if n == 0:
-        return nodes
-    count = 1
-    pending = np.empty(4 * MAX_DEPTH + 8, dtype=np.int64)  # nodes still to split: about one per level
-    pending[0] = 0
-    top = 1
-    level_bits = np.uint64(LEVEL_BITS)
-    while top > 0:
-        top -= 1
-        k = pending[top]
-        s, e = nodes[k, START], nodes[k, END]
-        if e - s <= capacity:
-            continue
-        # The slice's codes share their first `shared` of 2 D bits: it lies in one cell of that
-        # many bits, and its objects of depth shared / 2 or less (they sort first) are its own.
-        shared = 2 * depth - bit_length((keys[s] >> level_bits) ^ (keys[e - 1] >> level_bits))
-        stay = s
-        while stay < e and 2 * int(keys[stay] & np.uint64(LEVEL_MASK)) <= shared:
-            stay += 1
-        if stay == e:
-            continue  # a leaf: every object is its own (or all share one cell of the deepest level)
-        if top + 2 > pending.shape[0]:
-            pending = np.concatenate((pending, np.empty_like(pending)))
-        pending[top], pending[top + 1] = count + 1, count  # the left subtree first
-        top += 2
-        count = add_children(nodes, count, k, stay if stay > s else split_at_highest_bit(keys, s, e))
-    return nodes[:count]
+def loose_nodes(dim: int):
+    """The node kernel of a loose tree whose cells split in 2^dim (own/tree.py): 2 for the
+    quadtree, 3 for the octree (keys of dim * depth code bits, then the level)."""
+
+    @nb.njit(cache=True)
+    def nodes_of(keys, depth, capacity):
+        """The node table over the sorted keys, depth first (a node kernel of own/tree.py)."""
+        n = keys.shape[0]
+        nodes = new_table(n)
+        if n == 0:
+            return nodes
+        count = 1
+        pending = np.empty(4 * MAX_DEPTH + 8, dtype=np.int64)  # nodes still to split: about one per level
+        pending[0] = 0
+        top = 1
+        level_bits = np.uint64(LEVEL_BITS)
+        while top > 0:
+            top -= 1
+            k = pending[top]
+            s, e = nodes[k, START], nodes[k, END]
+            if e - s <= capacity:
+                continue
+            # The slice's codes share their first `shared` of dim * D bits: it lies in one cell of
+            # that many bits, and its objects of depth shared / dim or less (they sort first) are its own.
+            shared = dim * depth - bit_length((keys[s] >> level_bits) ^ (keys[e - 1] >> level_bits))
+            stay = s
+            while stay < e and dim * int(keys[stay] & np.uint64(LEVEL_MASK)) <= shared:
+                stay += 1
+            if stay == e:
+                continue  # a leaf: every object is its own (or all share one cell of the deepest level)
+            if top + 2 > pending.shape[0]:
+                pending = np.concatenate((pending, np.empty_like(pending)))
+            pending[top], pending[top + 1] = count + 1, count  # the left subtree first
+            top += 2
+            count = add_children(nodes, count, k, stay if stay > s else split_at_highest_bit(keys, s, e))
+        return nodes[:count]
+
+    return nodes_of
+
+
+quadtree_nodes = loose_nodes(2)
 
 
 quadtree_build = tree_builder(quadtree_keys, quadtree_nodes)
+
+# Over spheres: three code bits a level, 3 D + 5 key bits.
+MAX_DEPTH_3D = 19
+STEP_MASK_3D = (1 << MAX_DEPTH_3D) - 1
+
+
+@nb.njit(cache=True)
+def octree_keys(xyz, sr, x0, y0, z0, size, depth, keys):
+    """quadtree_keys over spheres: each object's cell of the lattice over the cube (x0, y0, z0,
+    size), the deepest whose cells are at least as wide as its box, as a 3D Morton code and depth."""
+    cells = float(1 << depth)
+    scale = cells / size if size > 0 else 0.0
+    if not (scale > 0 and np.isfinite(scale)):
+        keys[:] = 0
+        return
+    top = cells - 1.0
+    for a in range(xyz.shape[0]):
+        qx = np.int64(min(max((xyz[a, 0] - x0) * scale, 0.0), top))
+        qy = np.int64(min(max((xyz[a, 1] - y0) * scale, 0.0), top))
+        qz = np.int64(min(max((xyz[a, 2] - z0) * scale, 0.0), top))
+        steps = np.int64(np.ceil(min(2.0 * sr[a] * scale, cells)))
+        level = depth - bit_length(max(steps, 1) - 1)
+        keys[a] = np.uint64(qx | (qy << 19) | (qz << 38) | (level << 57))
+    for a in range(xyz.shape[0]):
+        packed = keys[a]
+        level = packed >> np.uint64(57)
+        mask = ~((np.uint64(1) << (np.uint64(depth) - level)) - np.uint64(1))
+        step_mask = np.uint64(STEP_MASK_3D)
+        qx = packed & step_mask & mask
+        qy = (packed >> np.uint64(19)) & step_mask & mask
+        qz = (packed >> np.uint64(38)) & step_mask & mask
+        keys[a] = (interleave3(qx, qy, qz) << np.uint64(LEVEL_BITS)) | level
+
+
+octree_build = tree_builder3(octree_keys, loose_nodes(3))
 
 
 class Quadtree(StaticsApart, SmallScenes, MortonTree):
@@ -117,11 +162,13 @@ class Quadtree(StaticsApart, SmallScenes, MortonTree):
     """
 
     name = "own.quadtree"
+    dims = (2, 3)
     defaults = {"capacity": 16, "max_depth": 16, "coherent": True}
     sweeps = (Knob("capacity", fixed([1, 2, 4, 8, 16, 32, 64]), "capacity (objects per leaf)"),
               Knob("max_depth", fixed([4, 6, 8, 10, 12, 16, 24]), "maximum depth"))
     method = "tree"
     build = staticmethod(quadtree_build)
+    build3 = staticmethod(octree_build)
 
     def __init__(self, **params):
         super().__init__(**params)
@@ -129,6 +176,12 @@ class Quadtree(StaticsApart, SmallScenes, MortonTree):
         self._depth = self._int_param("max_depth", 0)
         if self._depth > MAX_DEPTH:
             raise ValueError(f"{self.name}: max_depth must be at most {MAX_DEPTH}, got {self._depth}")
+
+    def _reset(self, positions, radii):
+        if self.dim == 3 and self._depth > MAX_DEPTH_3D:
+            raise ValueError(f"{self.name}: max_depth must be at most {MAX_DEPTH_3D} over spheres (an octree: three "
+                             f"code bits a level), got {self._depth}")
+        super()._reset(positions, radii)
 
     def _levels(self):
         """Each node's cell: the deepest lattice cell holding the cells of all its objects (depth,
@@ -142,7 +195,10 @@ class Quadtree(StaticsApart, SmallScenes, MortonTree):
         return depth, cx, cy
 
     def structure(self):
-        """Each node's cell (the one lattice cell holding its slice) as a rectangle."""
+        """Each node's cell (the one lattice cell holding its slice) as a rectangle (none drawn for
+        the octree)."""
+        if self.dim != 2:
+            return {}
         x0, y0, size = self._lattice
         depth, cx, cy = self._levels()
         side = size / 2.0 ** depth
@@ -150,30 +206,31 @@ class Quadtree(StaticsApart, SmallScenes, MortonTree):
                                                     (cy + 1) * side + y0]), axis=0)}
 
     def validate(self):
-        keys = self._work[2]
+        keys, dim = self._work[2], self.dim
         codes, level = keys >> np.uint64(LEVEL_BITS), (keys & np.uint64(LEVEL_MASK)).astype(np.int64)
         assert (level <= self._depth).all(), "an object is deeper than max_depth"
-        box, (x0, y0, size) = self._box, self._lattice
+        box, origin, size = self._box, self._lattice[:dim], self._lattice[dim]
         if size > 0 and not self._refitted:  # each box of the build fits its cell widened by half a cell
             side = size / 2.0 ** level
-            cell = np.array([_deinterleave(int(c >> np.uint64(2 * (self._depth - d)))) for c, d in zip(codes, level)],
-                            dtype=np.float64).reshape(-1, 2)
-            lo_x, lo_y = x0 + (cell[:, 0] - 0.5) * side, y0 + (cell[:, 1] - 0.5) * side
+            cell = np.array([_deinterleave(int(c >> np.uint64(dim * (self._depth - d))), dim)
+                             for c, d in zip(codes, level)], dtype=np.float64).reshape(-1, dim)
             slack = 1e-9 * size
-            assert ((box[0] >= lo_x - slack) & (box[1] <= lo_x + 2 * side + slack) & (box[2] >= lo_y - slack)
-                    & (box[3] <= lo_y + 2 * side + slack)).all(), "a box leaves its loose cell"
+            for a in range(dim):
+                low = origin[a] + (cell[:, a] - 0.5) * side
+                assert ((box[2 * a] >= low - slack) & (box[2 * a + 1] <= low + 2 * side + slack)).all(), \
+                    f"a box leaves its loose cell along {'xyz'[a]}"
 
-        def leaf_ok(s, e):  # within capacity, or every object its own (see quadtree_nodes)
-            shared = 2 * self._depth - int(codes[s] ^ codes[e - 1]).bit_length()
-            return e - s <= self._capacity or (2 * level[s:e] <= shared).all()
+        def leaf_ok(s, e):  # within capacity, or every object its own (see loose_nodes)
+            shared = dim * self._depth - int(codes[s] ^ codes[e - 1]).bit_length()
+            return e - s <= self._capacity or (dim * level[s:e] <= shared).all()
 
         self._validate_tree(leaf_ok)
 
 
-def _deinterleave(code: int) -> tuple[int, int]:
-    """The lattice point (x, y) whose Morton code is `code` (x in the even bits, y in the odd)."""
-    x = y = 0
-    for b in range(32):
-        x |= ((code >> (2 * b)) & 1) << b
-        y |= ((code >> (2 * b + 1)) & 1) << b
-    return x, y
+def _deinterleave(code: int, dim: int = 2) -> tuple[int, ...]:
+    """The lattice point whose Morton code is `code` (axis a in bits a, a + dim, a + 2 dim, ...)."""
+    point = [0] * dim
+    for b in range(64 // dim):
+        for a in range(dim):
+            point[a] |= ((code >> (dim * b + a)) & 1) << b
+    return tuple(point)

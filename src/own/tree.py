@@ -33,7 +33,7 @@ from engines.base import BroadPhase
 from .coherent import RepairSchedule, lattice_frame, resort
 from .common import PairCollector, gather, meet_mask, scan_mask
 from .morton import bit_length
-from .skin import SkinSchedule, filter_pairs, largest_step
+from .skin import SkinSchedule, filter_pairs, filter_pairs3, largest_step, largest_step3
 
 START, END, CHILD = range(3)
 NO_CHILD = -1
@@ -190,61 +190,73 @@ def _leaf_cross(order, box, bounds, nodes, u, v, buf, count):
     return count
 
 
-@nb.njit(cache=True)
-def tree_pairs(order, box, nodes, bounds, buf):
-    """Box-overlap pairs into buf, each once; returns (pairs found, node pairs visited).
+def pair_search(meet, leaf_self, leaf_cross):
+    """The compiled pair search of a tree from its box primitives (over circles here; over spheres
+    in own/tree3d.py): `meet(bounds, u, v)`, whether two nodes' bounds meet, `leaf_self` and
+    `leaf_cross`, the pairs within a leaf and between two leaves. (Compiled with them in it, as
+    tree_builder's build is.)"""
 
-    Simultaneous traversal: a node is paired with itself (its children with themselves and with
-    each other) and two overlapping nodes with each other (both split into their four child pairs,
-    or the one that is not a leaf: 5 to 8% faster than splitting the one holding more objects, on
-    the tumbler, smash and the moving pile), so every pair of leaves is reached at most once, by
-    one path from the root, and node pairs whose bounds do not meet are dropped as they are
-    pushed. Against one descent from the root per leaf, measured 2.1x faster on a settled pile at
-    n = 65536 (the descents re-tested the leaf's own ancestors and their neighbours every time)."""
-    count = visited = 0
-    if nodes.shape[0] == 0:
-        return count, visited
-    stack = np.empty((256, 2), dtype=np.int64)
-    stack[0, 0], stack[0, 1] = 0, 0
-    top = 1
-    while top > 0:
-        top -= 1
-        u, v = stack[top, 0], stack[top, 1]
-        visited += 1
-        if top + 4 > stack.shape[0]:
-            stack = np.concatenate((stack, np.empty_like(stack)))
-        if u == v:
-            left = nodes[u, CHILD]
-            if left == NO_CHILD:
-                count = _leaf_self(order, box, nodes[u, START], nodes[u, END], buf, count)
+    @nb.njit(cache=True)
+    def tree_pairs(order, box, nodes, bounds, buf):
+        """Box-overlap pairs into buf, each once; returns (pairs found, node pairs visited).
+
+        Simultaneous traversal: a node is paired with itself (its children with themselves and
+        with each other) and two overlapping nodes with each other (both split into their four
+        child pairs, or the one that is not a leaf: 5 to 8% faster than splitting the one holding
+        more objects, on the tumbler, smash and the moving pile), so every pair of leaves is
+        reached at most once, by one path from the root, and node pairs whose bounds do not meet
+        are dropped as they are pushed. Against one descent from the root per leaf, measured 2.1x
+        faster on a settled pile at n = 65536 (the descents re-tested the leaf's own ancestors and
+        their neighbours every time)."""
+        count = visited = 0
+        if nodes.shape[0] == 0:
+            return count, visited
+        stack = np.empty((256, 2), dtype=np.int64)
+        stack[0, 0], stack[0, 1] = 0, 0
+        top = 1
+        while top > 0:
+            top -= 1
+            u, v = stack[top, 0], stack[top, 1]
+            visited += 1
+            if top + 4 > stack.shape[0]:
+                stack = np.concatenate((stack, np.empty_like(stack)))
+            if u == v:
+                left = nodes[u, CHILD]
+                if left == NO_CHILD:
+                    count = leaf_self(order, box, nodes[u, START], nodes[u, END], buf, count)
+                    continue
+                stack[top, 0], stack[top, 1] = left, left
+                stack[top + 1, 0], stack[top + 1, 1] = left + 1, left + 1
+                top += 2
+                if meet(bounds, left, left + 1):
+                    stack[top, 0], stack[top, 1] = left, left + 1
+                    top += 1
                 continue
-            stack[top, 0], stack[top, 1] = left, left
-            stack[top + 1, 0], stack[top + 1, 1] = left + 1, left + 1
-            top += 2
-            if _meet(bounds, left, left + 1):
-                stack[top, 0], stack[top, 1] = left, left + 1
-                top += 1
-            continue
-        u_leaf, v_leaf = nodes[u, CHILD] == NO_CHILD, nodes[v, CHILD] == NO_CHILD
-        if u_leaf and v_leaf:
-            count = _leaf_cross(order, box, bounds, nodes, u, v, buf, count)
-            continue
-        if not u_leaf and not v_leaf:
-            u_left, v_left = nodes[u, CHILD], nodes[v, CHILD]
-            for u_child in (u_left, u_left + 1):
-                for v_child in (v_left, v_left + 1):
-                    if _meet(bounds, u_child, v_child):
-                        stack[top, 0], stack[top, 1] = u_child, v_child
-                        top += 1
-            continue
-        if u_leaf:  # split the one that is not a leaf
-            u, v = v, u
-        left = nodes[u, CHILD]
-        for child in (left, left + 1):
-            if _meet(bounds, child, v):
-                stack[top, 0], stack[top, 1] = child, v
-                top += 1
-    return count, visited
+            u_leaf, v_leaf = nodes[u, CHILD] == NO_CHILD, nodes[v, CHILD] == NO_CHILD
+            if u_leaf and v_leaf:
+                count = leaf_cross(order, box, bounds, nodes, u, v, buf, count)
+                continue
+            if not u_leaf and not v_leaf:
+                u_left, v_left = nodes[u, CHILD], nodes[v, CHILD]
+                for u_child in (u_left, u_left + 1):
+                    for v_child in (v_left, v_left + 1):
+                        if meet(bounds, u_child, v_child):
+                            stack[top, 0], stack[top, 1] = u_child, v_child
+                            top += 1
+                continue
+            if u_leaf:  # split the one that is not a leaf
+                u, v = v, u
+            left = nodes[u, CHILD]
+            for child in (left, left + 1):
+                if meet(bounds, child, v):
+                    stack[top, 0], stack[top, 1] = child, v
+                    top += 1
+        return count, visited
+
+    return tree_pairs
+
+
+tree_pairs = pair_search(_meet, _leaf_self, _leaf_cross)
 
 
 class MortonTree(BroadPhase):
@@ -253,23 +265,34 @@ class MortonTree(BroadPhase):
     bounds to the exact boxes until they have drifted apart (REFIT_DRIFT; after leaves apart at
     the first refit, it builds REFIT_RETRY frames before trying again). A subclass sets `build`
     (made by tree_builder), `_depth` and `_capacity`, and has a `coherent` parameter: False sorts
-    from the input order and builds every frame, to measure what coherence saves."""
+    from the input order and builds every frame, to measure what coherence saves. Over spheres the
+    tree is the same with `build3` (made by tree3d.tree_builder3) and own/tree3d.py's primitives."""
 
     build = None
+    build3 = None
 
     def __init__(self, **params):
         super().__init__(**params)
         self._collect = PairCollector()
         self._keep = PairCollector()  # the kept pairs, apart from the buffers a frame's pairs are handed back in
 
+    def _kernels(self):
+        """(build, refit, pair search, skin rule, kept-pair filter) for the dimension worked in."""
+        if self.dim == 3:
+            from .tree3d import refit3, tree_pairs3
+
+            return self.build3, refit3, tree_pairs3, largest_step3, filter_pairs3
+        return self.build, refit, tree_pairs, largest_step, filter_pairs
+
     def _reset(self, positions, radii):
-        n = self.n
+        n, dim = self.n, self.dim
+        self._build_kernel, self._refit_kernel, self._search, self._largest_step, self._filter = self._kernels()
         # The order is double-buffered (the repair reads last frame's while it writes this
         # frame's); -1 first: none yet. Every work array is kept between frames.
         self._order, self._spare_order = np.full(n, -1, dtype=np.int64), np.empty(n, dtype=np.int64)
-        self._work = (np.empty((n, 2)), np.empty(n), np.empty(n, dtype=np.uint64), np.empty(n, dtype=np.int64))
-        self._box = np.empty((4, n))  # by column: scans compare four contiguous runs
-        self._lattice = np.zeros(3)  # (x0, y0, size) of the lattice square; none yet
+        self._work = (np.empty((n, dim)), np.empty(n), np.empty(n, dtype=np.uint64), np.empty(n, dtype=np.int64))
+        self._box = np.empty((2 * dim, n))  # by column: scans compare four (six) contiguous runs
+        self._lattice = np.zeros(dim + 1)  # (x0, y0, size) of the lattice square, (x0, y0, z0, size) cube; none yet
         self._schedule = RepairSchedule()
         if self._built and self.params["coherent"]:
             # Built anew in a run, for the objects that appeared or went: the last tree lived until
@@ -289,7 +312,7 @@ class MortonTree(BroadPhase):
     def _update(self, positions):
         self._positions = positions
         self._since += 1
-        if self._skin > 0.0 and largest_step(positions, self._anchor) <= 0.5 * self._skin:
+        if self._skin > 0.0 and self._largest_step(positions, self._anchor) <= 0.5 * self._skin:
             self._stats = {**self._stats, "reused": 1}
             return
         if self.params["coherent"]:
@@ -306,7 +329,7 @@ class MortonTree(BroadPhase):
         """This frame's exact boxes in the tree of the last build (at skin zero): its order and
         leaves kept, their bounds refitted."""
         self._positions = positions
-        self._bounds = refit(positions, self.radii, self._order, self._box, self._nodes)
+        self._bounds = self._refit_kernel(positions, self.radii, self._order, self._box, self._nodes)
         self._since, self._refits, self._refitted = 0, self._refits + 1, self._refitted + 1
         self._stats = {**self._stats, "refits": self._refits, "reused": 0}
 
@@ -318,7 +341,7 @@ class MortonTree(BroadPhase):
             self._lattice[:] = 0.0  # and a lattice fitted to this frame alone
         repair = self._schedule.due(self._order[:1].min(initial=0) >= 0)
         radii = self.radii + 0.5 * self._skin if self._skin > 0.0 else self.radii
-        self._nodes, self._bounds, swaps = self.build(
+        self._nodes, self._bounds, swaps = self._build_kernel(
             positions, radii, self._order, self._spare_order, self._work, self._box, self._lattice, repair,
             self._depth, self._capacity)
         self._schedule.record(repair, swaps)
@@ -331,7 +354,7 @@ class MortonTree(BroadPhase):
 
     def _pairs(self):
         if self._skin == 0.0:
-            out, (visited,) = self._collect(tree_pairs, self._order, self._box, self._nodes, self._bounds)
+            out, (visited,) = self._collect(self._search, self._order, self._box, self._nodes, self._bounds)
             self._stats["visited"] = visited
             if not self._refitted:
                 self._visited_at_build = visited
@@ -342,9 +365,9 @@ class MortonTree(BroadPhase):
                     self._refit_wait = REFIT_RETRY
             return out
         if self._kept is None:  # the frame of the build: the grown boxes' pairs, kept
-            self._kept, (self._stats["visited"],) = self._keep(tree_pairs, self._order, self._box, self._nodes,
+            self._kept, (self._stats["visited"],) = self._keep(self._search, self._order, self._box, self._nodes,
                                                                self._bounds)
-        out, _ = self._collect(filter_pairs, self._kept, self._positions, self.radii)
+        out, _ = self._collect(self._filter, self._kept, self._positions, self.radii)
         self._overlapping = len(out)
         self._stats["kept"] = len(self._kept)
         return out
@@ -352,9 +375,9 @@ class MortonTree(BroadPhase):
     def _validate_tree(self, capacity_ok):
         """The checks every such tree passes; `capacity_ok(s, e)`: whether a leaf of that slice
         may hold what it holds."""
-        n, nodes, bounds, box = self.n, self._nodes, self._bounds, self._box
+        n, nodes, bounds, box, dim = self.n, self._nodes, self._bounds, self._box, self.dim
         if self._skin > 0.0:
-            assert largest_step(self._positions, self._anchor) <= 0.5 * self._skin, "an object outran the skin"
+            assert self._largest_step(self._positions, self._anchor) <= 0.5 * self._skin, "an object outran the skin"
         assert np.array_equal(np.sort(self._order), np.arange(n)), "sort order is not a permutation"
         keys = self._work[2]
         assert (keys[1:] >= keys[:-1]).all(), "keys are not sorted"
@@ -362,8 +385,9 @@ class MortonTree(BroadPhase):
         for k, (s, e, child) in enumerate(nodes):
             assert 0 <= s < e <= n, f"node {k}: its slice is empty or out of range"
             inside = box[:, s:e]
-            assert (bounds[k, 0] <= inside[0]).all() and (bounds[k, 2] >= inside[1]).all(), f"node {k} misses a box on x"
-            assert (bounds[k, 1] <= inside[2]).all() and (bounds[k, 3] >= inside[3]).all(), f"node {k} misses a box on y"
+            for a in range(dim):  # bounds: the lows then the highs; box rows: low and high per axis
+                assert (bounds[k, a] <= inside[2 * a]).all() and (bounds[k, dim + a] >= inside[2 * a + 1]).all(), \
+                    f"node {k} misses a box on {'xyz'[a]}"
             if child == NO_CHILD:
                 assert capacity_ok(s, e), f"leaf {k} holds {e - s} objects although it could split"
                 covered[s:e] += 1
