@@ -166,8 +166,36 @@ def test_our_sweep_and_prune_works_in_3d_along_the_axis_asked():
         sap.update(positions + 0.01)  # the order kept and repaired
         assert sap.stats()["axis"] == expected and sap.stats()["swaps"] >= 0
         np.testing.assert_array_equal(np.sort(keys(sap.pairs(), 400)), keys(brute_pairs(positions + 0.01, radii), 400))
-    with pytest.raises(ValueError, match=r"^own.sap: strips='on', sweep='sparse' and parallel are not taken"):
-        engines.create("own.sap", strips="on").reset(positions, radii)
+    with pytest.raises(ValueError, match=r"^own.sap: sweep='sparse' and parallel are not taken over spheres"):
+        engines.create("own.sap", sweep="sparse").reset(positions, radii)
+
+
+@pytest.mark.parametrize("strips", ["on", "off", "auto"])
+@settings(max_examples=40)
+@given(scene=sphere_scenes(), seed=st.integers(0, 2**16))
+def test_sweep_and_prune_in_columns_finds_exactly_the_box_overlaps(strips, scene, seed):
+    positions, radii = scene
+    n = len(positions)
+    rng = np.random.default_rng(seed)
+    sap = engines.create("own.sap_incremental", strips=strips)
+    sap.small_scene_n = 0
+    sap.reset(positions, radii)
+    for step in (0.0, 0.5, 20.0):
+        positions = positions + rng.uniform(-step, step, positions.shape)
+        sap.update(positions)
+        sap.validate()
+        np.testing.assert_array_equal(np.sort(keys(sap.pairs(), n)), keys(brute_pairs(positions, radii), n))
+
+
+def test_columns_make_the_3d_sweep_local_on_a_dense_scene():
+    rng = np.random.default_rng(8)
+    positions, radii = rng.uniform(0, 400, (20000, 3)), np.full(20000, 4.0)
+    plain, columns = (engines.create("own.sap", strips=s) for s in ("off", "auto"))
+    for sap in (plain, columns):
+        sap.reset(positions, radii)
+        np.testing.assert_array_equal(np.sort(keys(sap.pairs(), 20000)), keys(brute_pairs(positions, radii), 20000))
+    assert plain.stats()["columns"] == 0 and columns.stats()["columns"] > 100
+    assert columns.stats()["axis_overlaps"] < 0.1 * plain.stats()["axis_overlaps"]  # far fewer boxes tested
 
 
 def test_the_3d_grid_stays_small_on_a_line_of_spheres():

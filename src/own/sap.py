@@ -269,7 +269,8 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
 
     Spheres (positions (n, 3)): the plain sweep in 3D, along x, y, z, or with "auto" the one of the
     three along which the centres vary most, repaired between frames where incremental
-    (own/sap3d.py); strips "on", the sparse sweep and the parallel sweep are not taken there yet.
+    (own/sap3d.py), in columns over the other two axes where `strips` says (the strips' 3D form);
+    the sparse sweep and the parallel sweep are not taken there yet.
     """
 
     name = "own.sap"
@@ -279,7 +280,7 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
     sweeps = (Knob("axis", fixed(["x", "y", "auto"]), "sweep axis", dims=(2,)),
               Knob("axis", fixed(["x", "y", "z", "auto"]), "sweep axis", dims=(3,)),
               Knob("sweep", fixed(["plain", "sparse", "auto"]), "sweep", dims=(2,)),
-              Knob("strips", fixed(["on", "off", "auto"]), "strips", dims=(2,)))
+              Knob("strips", fixed(["on", "off", "auto"]), "strips (columns over spheres)"))
     defaults = {"axis": "auto", "incremental": False, "sweep": "auto", "strips": "auto", "parallel": False,
                 "parallel_from": PARALLEL_FROM_OVERLAPS}
 
@@ -297,10 +298,9 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
     def _reset(self, positions, radii):
         self._sweep3 = None
         if self.dim == 3:
-            if self.params["strips"] == "on" or self.params["sweep"] == "sparse" or self.params["parallel"]:
-                raise ValueError(f"{self.name}: strips='on', sweep='sparse' and parallel are not taken over spheres "
-                                 "yet")
-            self._sweep3 = Sweep3(radii, self.params["axis"], self._incremental)
+            if self.params["sweep"] == "sparse" or self.params["parallel"]:
+                raise ValueError(f"{self.name}: sweep='sparse' and parallel are not taken over spheres yet")
+            self._sweep3 = Sweep3(radii, self.params["axis"], self._incremental, self.params["strips"])
             self._update(positions)
             return
         if self.params["axis"] == "z":
