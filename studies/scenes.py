@@ -5,7 +5,8 @@ with pymunk (scenes/families.py: pile, rain, tumbler, smash, level), at each n o
 Backends are ranked on update + pairs (the broad phase itself); the report says per family which
 of our structured backends falls over 3x behind our fastest, how our fastest stands against the
 fastest engine, and where the ranking differs from the essay's motion. Writes results.csv,
-meta.json, scenes.csv and SCENES.md (docs/ for a full run).
+meta.json, scenes.csv and SCENES.md (docs/ for a full run). `--dim 3`: the same over spheres, with
+the families recorded with Bullet (pile, rain, tumbler; the report in docs/3d/).
 """
 
 from __future__ import annotations
@@ -17,11 +18,13 @@ import pandas as pd
 
 import engines
 from scenes import FAMILIES
+from scenes.families3d import FAMILIES_3D
 from scenes.generate import at_essay_density
 
-from .lib.cli import CliError, Parser, command_line, matched_backends, run_cli, warn_unavailable
+from .lib.cli import CliError, Parser, command_line, in_dimension, matched_backends, run_cli, warn_unavailable
 from .lib.harness import Job
-from .lib.options import add_backends_option, add_output_options, add_quick_option, add_trial_options, parse_checked
+from .lib.options import (add_backends_option, add_dim_option, add_output_options, add_quick_option,
+                          add_trial_options, dim_of, parse_checked)
 from .lib.output import Output, read_meta, report_folder
 from .lib.pool import Pool
 from .lib.results import RowWriter, missed_total, ok_lines, read_rows, summarise
@@ -36,8 +39,10 @@ WITHIN = 3.0
 
 def parser() -> Parser:
     p = Parser(prog="python -m studies.scenes", description=__doc__.split("\n\n")[0])
-    p.add_argument("--families", default=",".join((ESSAY_MOTION,) + FAMILIES), metavar="NAME[,NAME]",
-                   help=f"scene families (default: {ESSAY_MOTION}, the essay's motion, and {', '.join(FAMILIES)})")
+    p.add_argument("--families", metavar="NAME[,NAME]",
+                   help=f"scene families (default: {ESSAY_MOTION}, the essay's motion, and {', '.join(FAMILIES)}; "
+                        f"over spheres {', '.join(FAMILIES_3D)})")
+    add_dim_option(p)
     p.add_argument("--sizes", default="4096,65536", metavar="N[,N]", help="object counts (default 4096,65536)")
     add_backends_option(p)
     add_trial_options(p, frames=20, repeat=2, budget=0.25, timeout=300.0)
@@ -49,11 +54,12 @@ def parser() -> Parser:
 
 def parse(argv: list[str] | None):
     args = parse_checked(parser(), argv)
-    args.family_list = [f.strip() for f in args.families.split(",") if f.strip()]
-    unknown = [f for f in args.family_list if f not in (ESSAY_MOTION,) + FAMILIES]
+    known = known_families(dim_of(args))
+    args.family_list = [f.strip() for f in (args.families or ",".join(known)).split(",") if f.strip()]
+    unknown = [f for f in args.family_list if f not in known]
     if unknown or not args.family_list:
-        raise CliError(f"--families: unknown {', '.join(unknown) or 'none given'}; known: "
-                       f"{', '.join((ESSAY_MOTION,) + FAMILIES)}")
+        raise CliError(f"--families: unknown {', '.join(unknown) or 'none given'} in {dim_of(args)}D; known: "
+                       f"{', '.join(known)}")
     try:
         args.size_list = [int(v) for v in args.sizes.split(",")]
     except ValueError:
@@ -63,11 +69,17 @@ def parse(argv: list[str] | None):
     return args
 
 
+def known_families(dim: int) -> tuple[str, ...]:
+    """The essay's motion and the families recorded in this dimension."""
+    return (ESSAY_MOTION,) + (FAMILIES if dim == 2 else FAMILIES_3D)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     if args.report_only:
         return report(Path(args.out), report_folder(args, Path(args.out), read_meta(Path(args.out))))
-    chosen = matched_backends(args.backends)
+    dim = dim_of(args)
+    chosen = in_dimension(matched_backends(args.backends), dim)
     command = command_line("scenes", argv)
     # Every command that measured rows here: a resumed run may add sizes or backends.
     commands = (read_meta(Path(args.out)).get("commands", []) if args.resume else []) + [command]
@@ -77,12 +89,12 @@ def main(argv: list[str] | None = None) -> int:
         writer = RowWriter(out.path, args.resume)
         runner = Runner(writer, out, pool=Pool.from_args(args))
         out.meta(full=covers_every_backend(args, out.path), families=args.family_list, sizes=args.size_list,
-                 frames=args.frames, repeats=args.repeat,
+                 frames=args.frames, repeats=args.repeat, dim=dim,
                  unavailable=unavailable, commands=commands)
         jobs = []
         for family in args.family_list:
             for n in args.size_list:
-                scene = at_essay_density(family, n)
+                scene = at_essay_density(family, n, dim=dim)
                 jobs += [Job(backend, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout,
                              memory_mb=args.memory, scene=scene, frames=args.frames, tag={"label": family})
                          for backend in runnable]
@@ -98,7 +110,7 @@ def covers_every_backend(args, folder: Path) -> bool:
     backends or families writes its report into --out, and leaves the one in docs/ alone."""
     if args.quick:
         return False
-    every = set(args.family_list) == {ESSAY_MOTION, *FAMILIES} and args.backends == "*"
+    every = set(args.family_list) == set(known_families(dim_of(args))) and args.backends == "*"
     return every or (args.resume and bool(read_meta(folder).get("full")))
 
 
@@ -134,13 +146,15 @@ def report(folder: Path, report_dir: Path) -> int:
     rows, complete = read_rows(folder)
     meta = read_meta(folder)
     tables = family_tables(rows)
-    lines = ["# Scene families: the essay's motion and recorded scenes", "",
-             "Generated by `python -m studies.scenes` "
+    spheres = meta.get("dim", 2) == 3
+    lines = ["# Scene families: the essay's motion and recorded scenes" + (" (spheres)" if spheres else ""), "",
+             "Generated by `python -m studies.scenes" + (" --dim 3" if spheres else "") + "` "
              f"({', '.join(str(n) for n in sorted(rows.n.unique()))} objects; {meta.get('frames', '?')} timed frames x "
              f"{meta.get('repeats', '?')} repeats; {meta.get('machine', {}).get('cores', '?')} cores); "
              f"commands: {', '.join(f'`{c}`' for c in meta.get('commands', [meta.get('command', '?')]))}. Families "
-             "recorded with pymunk: see `scenes/families.py`. "
-             "Times are medians per frame; **broad** is update + pairs, the broad phase itself; **missed** "
+             + ("recorded with pybullet: see `scenes/families3d.py`. " if spheres else
+                "recorded with pymunk: see `scenes/families.py`. ")
+             + "Times are medians per frame; **broad** is update + pairs, the broad phase itself; **missed** "
              "sums the truly overlapping pairs (and, for 'boxes' backends, overlapping boxes) left out over "
              "every frame. **lifecycle** is how statics and spawning reach the backend: *native* through its own "
              "means, *rebuild* through the interface's generic path (only the objects alive, built anew when they "

@@ -161,7 +161,11 @@ def test_engine_never_misses_on_random_and_adversarial_scenes(name, scene):
 @pytest.mark.parametrize("name", RELIABLE)
 @pytest.mark.parametrize("dist", ["uniform", "gauss_x", "gauss_y", "clusters"])
 def test_engine_stays_correct_across_update_frames(name, dist):
-    traj = simulate(generate(dist, 300, seed=11, speed=3000.0, radii=(2.0, 30.0)), frames=15)
+    check_across_frames(name, simulate(generate(dist, 300, seed=11, speed=3000.0, radii=(2.0, 30.0)), frames=15))
+
+
+def check_across_frames(name, traj):
+    """The backend fed every frame of `traj`: valid pairs, none missed, in each."""
     backend = make(name)
     try:
         backend.reset(traj.positions[0], traj.scene.radii)
@@ -219,15 +223,7 @@ def test_engine_never_misses_on_random_and_adversarial_sphere_scenes(name, scene
 @pytest.mark.parametrize("name", SPHERE_ENGINES)
 @pytest.mark.parametrize("dist", ["uniform", "clusters"])
 def test_engine_stays_correct_across_update_frames_in_3d(name, dist):
-    traj = simulate(generate(dist, 300, seed=12, speed=3000.0, radii=(2.0, 30.0), dim=3), frames=10)
-    backend = make(name)
-    try:
-        backend.reset(traj.positions[0], traj.scene.radii)
-        for frame in traj.positions:
-            backend.update(frame)
-            check_frame(backend, frame, traj.scene.radii)
-    finally:
-        backend.close()
+    check_across_frames(name, simulate(generate(dist, 300, seed=12, speed=3000.0, radii=(2.0, 30.0), dim=3), frames=10))
 
 
 @pytest.mark.parametrize("name", [n for n in SPHERE_ENGINES
@@ -436,6 +432,8 @@ REFUSED = [  # (backend, positions, radii, the words of the refusal, what the en
      ("[]", "SIGABRT")),  # float32 makes every point infinite: it finds nothing (and at times aborts as it exits)
     ("freud.linkcell", SPREAD * 100, np.full(50, 1e-4), "9.85e+11 cells of width 0.0002",
      "MemoryError"),  # a cell list of 1e12 cells: std::bad_alloc here (with the memory capped; uncapped, the OOM killer)
+    ("bullet.simple", np.column_stack([np.arange(65537) % 256, np.arange(65537) // 256]) * 3.0, np.ones(65537),
+     "65537 objects, over its limit of 65536", "SIGSEGV"),  # its 65537th body, in createMultiBody
 ]
 
 
@@ -461,6 +459,8 @@ def test_a_move_beyond_an_engines_limits_is_refused_too():
 # Engines whose unguarded failure is exhausting the memory: run with this much address space, so
 # that the test sees the engine's own error rather than the machine's out-of-memory killer.
 UNGUARDED_MEMORY = {"freud.linkcell": 4 << 30}
+# Engines whose failure comes only after a long set-up (65537 bodies created one by one): seconds.
+UNGUARDED_SECONDS = {"bullet.simple": 180}
 UNGUARDED = textwrap.dedent("""
     import sys, numpy as np
     import engines
@@ -499,7 +499,7 @@ def test_the_guards_are_needed_unguarded_the_engine_fails(name, positions, radii
 
     try:
         done = subprocess.run([sys.executable, "-c", UNGUARDED, name, str(tmp_path / "p.npy"), str(tmp_path / "r.npy")],
-                              capture_output=True, text=True, timeout=10, env=env,
+                              capture_output=True, text=True, timeout=UNGUARDED_SECONDS.get(name, 10), env=env,
                               preexec_fn=limit_memory if cap else None)
         seen = {-11: "SIGSEGV", -6: "SIGABRT"}.get(done.returncode) or done.stdout.strip().splitlines()[-1]
     except subprocess.TimeoutExpired:

@@ -58,7 +58,11 @@ def run_through(backend, traj):
 @pytest.mark.parametrize("name", OWN_AND_ESSAY + RELIABLE)
 @pytest.mark.parametrize("spawn", [False, True], ids=["statics", "statics and spawning"])
 def test_every_backend_takes_statics_and_spawning(name, spawn):
-    traj = simulate(lifecycle_scene(spawn=spawn), 6)
+    check_lifecycle(name, simulate(lifecycle_scene(spawn=spawn), 6))
+
+
+def check_lifecycle(name, traj):
+    """Every frame checked (run_through), and exactly the box pairs where the backend is exact."""
     backend = make(name)
     try:
         for f, got in run_through(backend, traj):
@@ -73,13 +77,7 @@ def test_every_backend_takes_statics_and_spawning(name, spawn):
 def test_every_3d_backend_takes_statics_and_spawning_of_spheres(name):
     traj = simulate(lifecycle_scene(dim=3), 6)
     assert len(traj.box_pairs[0]) > 50  # enough overlaps for the check to mean something
-    backend = make(name)
-    try:
-        for f, got in run_through(backend, traj):
-            if backend.exact:
-                assert np.array_equal(np.sort(keys(got, traj.scene.n)), keys(traj.box_pairs[f], traj.scene.n))
-    finally:
-        backend.close()
+    check_lifecycle(name, traj)
 
 
 @pytest.mark.parametrize(("name", "params"), EXACT, ids=IDS)

@@ -219,6 +219,21 @@ def test_the_scenes_study_reports_every_family(tmp_path, capsys):
     assert json.loads((out / "meta.json").read_text())["families"] == ["uniform", "pile", "rain", "level"]
 
 
+def test_the_scenes_study_over_spheres_takes_the_families_recorded_with_bullet(tmp_path):
+    out = tmp_path / "scenes"
+    assert scenes_study.main(["--dim", "3", "--sizes", "300", "--backends", "own.grid,own.bvh,bullet.dbvt,box2d.v3",
+                              "--frames", "2", "--repeat", "1", "--out", str(out), "--report-dir", str(out)]) == 0
+    meta = json.loads((out / "meta.json").read_text())
+    assert meta["families"] == ["uniform", *FAMILIES_3D] and meta["dim"] == 3
+    table = pd.read_csv(out / "scenes.csv")
+    assert set(table.family) == {"uniform", *FAMILIES_3D}
+    md = (out / "SCENES.md").read_text()
+    assert md.startswith("# Scene families: the essay's motion and recorded scenes (spheres)") and "pybullet" in md
+    rows = pd.read_csv(out / "results.csv")
+    assert set(rows.backend) == {"own.grid", "own.bvh", "bullet.dbvt"} and (rows.dim == 3).all()
+    assert (rows[rows.backend.str.startswith("own.")].missed == 0).all()
+
+
 def test_stress_measures_a_trajectory_and_tradeoff_refuses_a_bad_one_before_touching_out(tmp_path):
     from studies import stress, tradeoff
     from studies.lib.cli import CliError

@@ -30,7 +30,12 @@ def stress_trajectories():
 
 @pytest.mark.parametrize("backend", EXACT)
 def test_our_backends_are_exact_on_every_stress_scene(backend, stress_trajectories):
-    for name, traj in stress_trajectories.items():
+    check_exact(backend, stress_trajectories)
+
+
+def check_exact(backend, trajectories):
+    """Every frame of every trajectory: exactly the box overlaps, the structure valid."""
+    for name, traj in trajectories.items():
         b = engines.create(backend)
         b.reset(traj.positions[0], traj.scene.radii)
         for f, frame in enumerate(traj.positions):
@@ -158,15 +163,7 @@ def test_the_stress_scenes_over_spheres_are_the_same_set_in_3d(sphere_stress_tra
 
 @pytest.mark.parametrize("backend", SPHERE_EXACT)
 def test_our_3d_backends_are_exact_on_every_stress_scene_over_spheres(backend, sphere_stress_trajectories):
-    for name, traj in sphere_stress_trajectories.items():
-        b = engines.create(backend)
-        b.reset(traj.positions[0], traj.scene.radii)
-        for f, frame in enumerate(traj.positions):
-            b.update(frame)
-            got = b.pairs()
-            b.validate()
-            n = traj.scene.n
-            assert np.array_equal(np.sort(keys(got, n)), keys(brute_pairs(frame, traj.scene.radii), n)), (name, f)
+    check_exact(backend, sphere_stress_trajectories)
 
 
 def test_stress_study_over_spheres(tmp_path):

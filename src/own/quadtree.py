@@ -20,6 +20,9 @@ its bounds refitted, as the BVH's (own/tree.py): objects stay in the cells they 
 at the build, which grow loose by as much as their objects moved, until the searches show them
 drifting apart. Sorted into cells afresh every frame instead, it took 1.2 to 1.7x the time on the
 tumbler, smash and the moving pile (n = 4096 and 65536), and the same on the level.
+
+Over spheres it is the loose octree: the lattice is a cube, a cell's code has three bits a level
+(depth at most 19), and the same node kernel splits it (`loose_nodes(3)`; own/tree3d.py).
 """
 
 from __future__ import annotations
@@ -151,11 +154,11 @@ octree_build = tree_builder3(octree_keys, loose_nodes(3))
 
 
 class Quadtree(StaticsApart, SmallScenes, MortonTree):
-    """Loose quadtree over the centres, built from last frame's order once an object has moved past
-    its skin, refitted in between where everything moves (own/tree.py).
+    """Loose quadtree over the centres (over spheres a loose octree), rebuilt once an object has
+    moved past its skin, refitted in between where everything moves (own/tree.py).
 
     A node splits while it holds more than `capacity` objects and they do not all share one cell
-    of depth `max_depth` (at most MAX_DEPTH), the deepest level. Large objects sit near the root,
+    of depth `max_depth` (at most MAX_DEPTH, MAX_DEPTH_3D over spheres), the deepest level. Large objects sit near the root,
     in their own leaf, and are tested against what their bounds meet. `coherent` takes the
     objects in last frame's sorted order and repairs it, and keeps the tree under its skin (False
     sorts from the input order and builds every frame, to measure what coherence saves).
