@@ -44,7 +44,7 @@ TRIAL_OPTIONS = ("frames", "repeat", "budget", "timeout", "memory")
 
 def add_scene_options(parser: argparse.ArgumentParser, n: int = 2048) -> None:
     g = parser.add_argument_group("scene")
-    g.add_argument("--n", type=int, default=n, help=f"number of circles (default {n})")
+    g.add_argument("--n", type=int, default=n, help=f"number of objects, circles or spheres (default {n})")
     g.add_argument("--dist", choices=SCENE_KINDS, default="uniform",
                    help=f"placement moved by the essay's motion ({', '.join(DISTRIBUTIONS)}), or a family recorded "
                         f"with pymunk ({', '.join(FAMILIES)}; radii 4:8 unless given), over spheres with Bullet "
