@@ -41,7 +41,7 @@ def test_unknown_parameter_is_a_clear_error():
         ("own.quadtree", {"capacity": 0}, "capacity must be an integer >= 1"),
         ("own.quadtree", {"max_depth": 27}, "max_depth must be at most 26"),
         ("own.bvh", {"leaf_size": 0}, "leaf_size must be an integer >= 1"),
-        ("own.sap", {"axis": "z"}, "axis must be one of"),
+        ("own.sap", {"axis": "w"}, "axis must be one of"),
         ("own.sap", {"sweep": "fast"}, "sweep must be one of auto, plain, sparse, got 'fast'"),
         ("own.sap", {"strips": "yes"}, "strips must be one of auto, on, off, got 'yes'"),
         ("own.sap_parallel", {"parallel_from": -1}, "parallel_from must be an integer >= 0"),

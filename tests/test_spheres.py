@@ -233,3 +233,11 @@ def test_the_3d_grid_split_over_every_core_finds_what_one_thread_does(per_cell):
     cubes.update(positions)
     cubes.validate()
     np.testing.assert_array_equal(np.sort(keys(cubes.pairs(), 3000)), expected)
+
+
+def test_the_z_axis_is_for_spheres_only():
+    with pytest.raises(ValueError, match=r"^own.sap: axis 'z' is for spheres"):
+        engines.create("own.sap", axis="z").reset(np.zeros((3, 2)), np.ones(3))
+    sap = engines.create("own.sap", axis="z")
+    sap.reset(np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1.5]]), np.ones(2))
+    assert sap.pairs().tolist() == [[0, 1]] and sap.stats()["axis"] == 2
