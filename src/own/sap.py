@@ -295,6 +295,12 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         self._collect = PairCollector()
         self._collect_chunks = ChunkedPairCollector() if self.params["parallel"] else None
 
+    def _positions_to_reset(self, positions):
+        pos = super()._positions_to_reset(positions)
+        if self.params["axis"] == "z" and self.dim == 2:  # checked here: a small scene skips _reset
+            raise ValueError(f"{self.name}: axis 'z' is for spheres; circles are swept along x, y or 'auto'")
+        return pos
+
     def _reset(self, positions, radii):
         self._sweep3 = None
         if self.dim == 3:
@@ -303,8 +309,6 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
             self._sweep3 = Sweep3(radii, self.params["axis"], self._incremental, self.params["strips"])
             self._update(positions)
             return
-        if self.params["axis"] == "z":
-            raise ValueError(f"{self.name}: axis 'z' is for spheres; circles are swept along x, y or 'auto'")
         n = self.n
         # The last scene's counts are no guide to this one.
         self._last_pairs, self._last_overlaps, self._float32_too_coarse = None, 0, False
