@@ -38,8 +38,7 @@ import numpy as np
 
 import engines
 from engines.pairs import keys
-from own.bvh import morton_codes
-from own.morton import morton_codes3
+from own.bvh import morton_codes, morton_codes3
 from own.floor import FLOOR_KERNELS
 from own.parallel import threading_layer, threads
 from scenes.generate import at_essay_density
@@ -73,7 +72,6 @@ PARALLEL = {"own.grid": ["own.grid_parallel"], "own.sap": ["own.sap_parallel"]}
 # not see the machine quiet at all.
 MIN_PASSES = 3
 SECONDS = 2.0
-MORTON3_BITS = 10  # per axis for the spatial order of spheres: 2^30 cells, far more than objects
 # Over spheres: the sizes measured, and the rivals' limits in the harness (a rival that stops at
 # one size is not run at the next).
 SPHERE_SIZES = (2048, 131072, 1048576)
@@ -124,7 +122,7 @@ def tight_loop(backend: str, traj: Trajectory, seconds: float, **params) -> tupl
 
 def spatial_order(positions: np.ndarray) -> np.ndarray:
     """A numbering of the objects along a Morton curve through their centres."""
-    codes = morton_codes(positions) if positions.shape[1] == 2 else morton_codes3(positions, MORTON3_BITS)
+    codes = morton_codes(positions) if positions.shape[1] == 2 else morton_codes3(positions)
     return np.argsort(codes, kind="stable")
 
 

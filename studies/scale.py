@@ -209,8 +209,8 @@ def spheres_section(medians: pd.DataFrame, meta: dict) -> str:
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     versus = ours_against_engines_per_n(medians).set_index(["dist", "n"])
     particles = ours_against_engines_per_n(medians, "particle").set_index(["dist", "n"])
-    keys = sorted(dict.fromkeys(zip(medians.dist, medians.n)), key=lambda k: (list(medians.dist).index(k[0]), k[1]))
-    for key in keys:  # by kind of scene in the run's order, then n
+    dists = list(dict.fromkeys(medians.dist))  # the run's order
+    for key in sorted(set(zip(medians.dist, medians.n)), key=lambda k: (dists.index(k[0]), k[1])):
         if key not in versus.index and key not in particles.index:
             continue
         r = versus.loc[key] if key in versus.index else None

@@ -28,7 +28,7 @@ from .morton import interleave, interleave3
 from .small import SmallScenes
 from .statics import StaticsApart
 from .tree import END, START, MortonTree, add_children, new_table, split_at_highest_bit, tree_builder
-from .tree3d import tree_builder3
+from .tree3d import cube_frame, tree_builder3
 
 MORTON_BITS = 16  # per axis: 2^16 lattice steps over the lattice square
 
@@ -108,6 +108,16 @@ def centre_codes3(xyz, sr, x0, y0, z0, size, depth, codes):
 
 
 bvh_build3 = tree_builder3(centre_codes3, bvh_nodes)
+
+
+@nb.njit(cache=True)
+def morton_codes3(positions: np.ndarray) -> np.ndarray:
+    """morton_codes over spheres: 48-bit codes of the centres on the lattice over their cube."""
+    n = positions.shape[0]
+    codes, points = np.zeros(n, dtype=np.uint64), np.zeros(n)
+    x0, y0, z0, size = cube_frame(positions, points)
+    centre_codes3(positions, points, x0, y0, z0, size, MORTON_BITS, codes)
+    return codes
 
 
 class LinearBvh(StaticsApart, SmallScenes, MortonTree):

@@ -223,6 +223,7 @@ class Cubes:
         self.start = np.zeros(0, dtype=np.int64)
         self._key = np.empty(n, dtype=np.int64)
         self._order = np.arange(n, dtype=np.int64)
+        self._built = False  # no slots yet: the first build takes the objects in input order
         self.tests = 0
         self._chunks = chunks
         self._collect = ChunkedPairCollector() if chunks else PairCollector()
@@ -237,8 +238,6 @@ class Cubes:
         grid3_build(positions, self.radii, self.layout, order, self.start, self._key, self._spare)
         self.slots, self._spare = self._spare, self.slots
         self._built = True
-
-    _built = False
 
     def pairs(self) -> np.ndarray:
         if self._chunks:

@@ -51,27 +51,3 @@ def interleave3(qx, qy, qz) -> np.uint64:
     1, 4, 7, ..., z in 2, 5, 8, ... (the order of an octree's pre-order traversal)."""
     return _spread3(np.uint64(qx)) | (_spread3(np.uint64(qy)) << np.uint64(1)) | (_spread3(np.uint64(qz)) << np.uint64(2))
 
-
-@nb.njit(cache=True)
-def morton_codes3(positions, bits):
-    """Morton code of each centre of (n, 3) `positions` on the 2^bits lattice (bits <= 21) over the
-    cube around the centres; all 0 where the cube is a point or its scale overflows."""
-    n = positions.shape[0]
-    codes = np.zeros(n, dtype=np.uint64)
-    if n == 0:
-        return codes
-    lo, hi = positions[0].copy(), positions[0].copy()
-    for i in range(n):
-        for a in range(3):
-            lo[a], hi[a] = min(lo[a], positions[i, a]), max(hi[a], positions[i, a])
-    size = max(0.5 * hi[0] - 0.5 * lo[0], 0.5 * hi[1] - 0.5 * lo[1], 0.5 * hi[2] - 0.5 * lo[2])
-    top = float((1 << bits) - 1)
-    scale = 0.5 * (top + 1.0) / size if size > 0 else 0.0
-    if not (scale > 0 and np.isfinite(scale)):
-        return codes
-    for i in range(n):
-        qx = np.int64(min(max((positions[i, 0] - lo[0]) * scale, 0.0), top))
-        qy = np.int64(min(max((positions[i, 1] - lo[1]) * scale, 0.0), top))
-        qz = np.int64(min(max((positions[i, 2] - lo[2]) * scale, 0.0), top))
-        codes[i] = interleave3(qx, qy, qz)
-    return codes
