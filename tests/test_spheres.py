@@ -12,9 +12,12 @@ from hypothesis import strategies as st
 
 import engines
 from engines.pairs import is_canonical, keys
+from own import grid_incremental3d
 from own.brute import brute_pairs
 from own.grid3d import grid3_box_pairs
 from own.reference import BRUTE_FORCE_LIMIT, box_pairs, circle_pairs, narrow_phase
+from scenes.generate import at_essay_density
+from scenes.motion import simulate
 from scenes.scene import check_positions
 from strategies import sphere_scenes
 
@@ -106,8 +109,8 @@ OWN_SPHERE_BACKENDS = [name for name in SPHERE_BACKENDS if name.startswith("own.
 
 
 def test_our_exact_backends_work_in_3d():
-    assert {"own.grid", "own.grid_parallel", "own.sap", "own.sap_incremental", "own.quadtree", "own.bvh",
-            "own.verlet", "own.brute"} <= set(OWN_SPHERE_BACKENDS)
+    assert {"own.grid", "own.grid_incremental", "own.grid_parallel", "own.sap", "own.sap_incremental", "own.quadtree",
+            "own.bvh", "own.verlet", "own.brute"} <= set(OWN_SPHERE_BACKENDS)
 
 
 @pytest.mark.parametrize("name", OWN_SPHERE_BACKENDS)
@@ -241,3 +244,88 @@ def test_the_z_axis_is_for_spheres_only():
     sap = engines.create("own.sap", axis="z")
     sap.reset(np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1.5]]), np.ones(2))
     assert sap.pairs().tolist() == [[0, 1]] and sap.stats()["axis"] == 2
+
+
+def _incremental_over_spheres(positions, radii, **params):
+    grid = engines.create("own.grid_incremental", **params)
+    grid.small_scene_n = 0  # the structure at every n
+    grid.reset(positions, radii)
+    return grid
+
+
+def _exact(grid, positions, radii):
+    grid.validate()
+    n = len(positions)
+    got = grid.pairs()
+    assert is_canonical(got, n) is None
+    np.testing.assert_array_equal(np.sort(keys(got, n)), keys(brute_pairs(positions, radii), n))
+
+
+def test_the_incremental_grid_over_spheres_updates_its_candidates_while_few_objects_change_cube():
+    traj = simulate(at_essay_density("uniform", 3000, seed=5, dim=3), frames=8)
+    grid = _incremental_over_spheres(traj.positions[0], traj.scene.radii)
+    assert grid.stats()["rebuilt"] == 1 and grid.stats()["candidates"] > 3000
+    for f in range(1, traj.frames):
+        grid.update(traj.positions[f])
+        assert grid.stats()["rebuilt"] == 0 and 0 < grid.stats()["moved"] < 3000 // 32, grid.stats()
+        _exact(grid, traj.positions[f], traj.scene.radii)
+    jumped = np.random.default_rng(0).permutation(traj.positions[1])  # everything jumps: rebuilt
+    grid.update(jumped)
+    assert grid.stats()["rebuilt"] == 1
+    _exact(grid, jumped, traj.scene.radii)
+
+
+def test_the_incremental_grid_over_spheres_renumbers_its_objects_after_enough_moves(monkeypatch):
+    monkeypatch.setattr(grid_incremental3d, "RENEW_AFTER_MOVES_PER_OBJECT", 0)  # after any move
+    traj = simulate(at_essay_density("uniform", 3000, seed=5, dim=3), frames=4)
+    grid = _incremental_over_spheres(traj.positions[0], traj.scene.radii)
+    rebuilt = []
+    for f in range(1, traj.frames):
+        grid.update(traj.positions[f])
+        rebuilt.append(grid.stats()["rebuilt"])
+        _exact(grid, traj.positions[f], traj.scene.radii)
+    assert rebuilt == [0, 1, 0]  # the first frame's moves make the second renumber
+
+
+def test_the_incremental_grid_over_spheres_keeps_its_layout_within_the_slack_and_grows_past_it():
+    rng = np.random.default_rng(4)
+    positions, radii = rng.uniform(0.0, 60.0, (1000, 3)), np.full(1000, 1.0)
+    grid = _incremental_over_spheres(positions, radii)
+    side, cells = grid.stats()["cell"], grid.stats()["cells"]
+    outside = positions.copy()
+    outside[:5] = [60.0 + 2.0 * side, -2.0 * side, 30.0]  # two cubes past the layout: clamped, no new layout
+    grid.update(outside)
+    assert grid.stats()["rebuilt"] == 0 and grid.stats()["cells"] == cells
+    _exact(grid, outside, radii)
+    for spread in (1.5, 2.0):  # past the slack: a new layout, wider cubes (at most 8 per object)
+        positions = positions * spread
+        grid.update(positions)
+        assert grid.stats()["rebuilt"] == 1 and grid.stats()["cell"] > side
+        side = grid.stats()["cell"]
+        _exact(grid, positions, radii)
+
+
+def test_the_incremental_grid_over_spheres_grows_its_candidates_on_a_dense_clump():
+    rng = np.random.default_rng(8)
+    positions = rng.normal(0.0, 1.0, (600, 3))  # a few cubes hold them all: far more than 4n candidates
+    radii = rng.uniform(0.5, 1.0, 600)
+    grid = _incremental_over_spheres(positions, radii)
+    assert grid.stats()["candidates"] > 4 * 600
+    _exact(grid, positions, radii)
+    for step in range(3):
+        positions = positions + rng.normal(0.0, 0.3, positions.shape)
+        grid.update(positions)
+        _exact(grid, positions, radii)
+
+
+@pytest.mark.parametrize("specialise", [True, False])
+def test_the_incremental_grid_over_spheres_reads_one_radius_only_where_asked(specialise):
+    rng = np.random.default_rng(3)
+    positions, radii = rng.uniform(0.0, 80.0, (800, 3)), np.full(800, 2.5)
+    grid = _incremental_over_spheres(positions, radii, specialise=specialise)
+    assert isinstance(grid._cubes._radius, float) == specialise
+    assert ("left_out_radius_reads" in grid.stats()) == specialise  # bench times the general kernels beside
+    for step in range(3):
+        positions = positions + rng.normal(0.0, 1.0, positions.shape)
+        grid.update(positions)
+        _exact(grid, positions, radii)

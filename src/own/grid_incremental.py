@@ -24,6 +24,7 @@ import numpy as np
 from .common import PairCollector, centre_extents, emit, radius_of
 from .grid import (CellLayout, cell_key, covered_cells, gather_centres, grid_layout, key_space, large_against_large,
                    small_limit)
+from .grid3d import CubesForSpheres
 from .statics import StaticsApart
 
 # A frame with more objects changing cell than n / this rebuilds: past that, listing every
@@ -110,18 +111,24 @@ def incremental_rebuild(positions, radii, layout, limit, state, head, cand):
             for b in range(head[c + w - 2], head[c + w + 1]):
                 cand[k, 0], cand[k, 1] = a, b
                 k += 1
-    # Each cell's list is its run of ranks, ascending, linked in one pass (the runs are
-    # contiguous: no front insertion needed).
+    link_runs(rkey, head, nxt, prv, w)
+    return m
+
+
+@nb.njit(cache=True, inline="always")
+def link_runs(rkey, head, nxt, prv, offset):
+    """Each cell's list made its run of ranks (ranks in key order), ascending, in one pass (the
+    runs are contiguous: no front insertion needed); heads indexed by key + `offset`."""
+    n = rkey.shape[0]
     head[:] = -1
     for a in range(n):
         c = rkey[a]
         first = a == 0 or rkey[a - 1] != c
         last = a == n - 1 or rkey[a + 1] != c
         if first:
-            head[c + w] = a
+            head[c + offset] = a
         prv[a] = -1 if first else a - 1
         nxt[a] = -1 if last else a + 1
-    return m
 
 
 @nb.njit(cache=True, inline="always")
@@ -323,14 +330,16 @@ def large_pairs(state, head, layout, limit, buf, count, tests):
     return large_against_large(xy, sr, perm, first_large, perm.shape[0], buf, count, tests)
 
 
-def new_state(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The arrays of the kernels' `state` (see unpack): three arrays, not eight, since each array
-    handed to a compiled call costs about 60 ns to unpack (a few percent of a frame at n = 2048)."""
-    return np.empty((6, n), dtype=np.int64), np.empty((n, 2)), np.empty(n)
+def new_state(n: int, dim: int = 2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The arrays of the kernels' `state` (see unpack) for n objects in `dim` dimensions: three
+    arrays, not eight, since each array handed to a compiled call costs about 60 ns to unpack (a
+    few percent of a frame at n = 2048)."""
+    return np.empty((6, n), dtype=np.int64), np.empty((n, dim)), np.empty(n)
 
 
-class IncrementalGrid(StaticsApart, CellLayout):
-    """own.grid's cells with candidate pairs kept between frames (see the module's docstring).
+class IncrementalSquares(StaticsApart, CellLayout):
+    """own.grid_incremental over circles: own.grid's cells with candidate pairs kept between
+    frames (see the module's docstring).
 
     `p` and `cell` as for own.grid; `specialise` (on by default) runs kernels without per-object
     radius reads where every radius is equal (off: the general kernels, to measure the saving).
@@ -437,3 +446,12 @@ class IncrementalGrid(StaticsApart, CellLayout):
         got = {(int(min(a, b)), int(max(a, b))) for a, b in self._candidates()}
         assert len(got) == self._m, "a candidate is listed twice"
         assert got == expected, "the candidates are not the pairs of small objects in neighbouring cells"
+
+
+class IncrementalGrid(CubesForSpheres, IncrementalSquares):
+    """own.grid_incremental: over circles IncrementalSquares, over spheres the same bookkeeping
+    over cubes (own/grid_incremental3d.py). `p` and `cell` are taken over circles only."""
+
+    def new_cubes(self, radii):
+        from .grid_incremental3d import IncrementalCubes  # imported here: it builds on this module's kernels
+        return IncrementalCubes(radii, self.params["specialise"])

@@ -26,7 +26,7 @@ from .common import PairCollector, radius_of
 from .grid import cell_key, grid_layout, key_space, small_limit
 from .grid3d import CubesForSpheres
 from .grid_incremental import (LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT,
-                               IncrementalGrid, _boxes_overlap, add_neighbours, drop_moved, first_large_rank,
+                               IncrementalSquares, _boxes_overlap, add_neighbours, drop_moved, first_large_rank,
                                head_length, incremental_rebuild, large_pairs, move, unpack)
 from .parallel import chunk_count
 
@@ -195,13 +195,13 @@ def large_only(state, head, layout, limit, tests, buf):
     return large_pairs(state, head, layout, limit, buf, 0, tests)
 
 
-class ParallelSquares(IncrementalGrid):
+class ParallelSquares(IncrementalSquares):
     """own.grid_parallel over circles: own.grid_incremental with each frame split over every core
     (see the module's docstring), from `parallel_from` objects on; below that, one thread exactly
     as own.grid_incremental."""
 
     name = "own.grid_parallel"
-    defaults = {**IncrementalGrid.defaults, "parallel_from": PARALLEL_FROM_OBJECTS}
+    defaults = {**IncrementalSquares.defaults, "parallel_from": PARALLEL_FROM_OBJECTS}
 
     def __init__(self, **params):
         super().__init__(**params)
