@@ -510,8 +510,9 @@ def test_the_guards_are_needed_unguarded_the_engine_fails(name, positions, radii
 @pytest.mark.engine_limitation
 def test_box2d_v2_profile_timer_drops_the_start_times_sub_millisecond_part():
     """Why box2d.v2 reports no engine broad-phase time: its profile's nested timers (solve holds
-    the broad phase) differ by whole milliseconds in every step, which only a timer that drops the
-    fraction of its start time can produce."""
+    the broad phase) differ by whole milliseconds, 0 or 1 at random, which only a timer that drops
+    the fraction of its start time can produce. Nearly every step, not every one: on a loaded
+    machine one step in 30 once differed by 0.017 ms."""
     backend = make("box2d.v2")
     scene = generate("uniform", 2048, seed=0)
     backend.reset(scene.positions, scene.radii)
@@ -522,7 +523,8 @@ def test_box2d_v2_profile_timer_drops_the_start_times_sub_millisecond_part():
         profile = world.GetProfile()
         differences.append(profile.solve - profile.broadphase)
     differences = np.array(differences)
-    assert np.allclose(differences, np.round(differences), atol=2e-3), differences
+    whole = np.isclose(differences, np.round(differences), atol=2e-3)
+    assert whole.mean() >= 0.9 and (differences[whole] >= 0.5).any(), differences
 
 
 @pytest.mark.engine_limitation

@@ -134,7 +134,10 @@ def test_quick_tune_end_to_end_writes_rows_figures_and_best(tmp_path, capsys):
                       "--out", str(out)]) == 0
     rows = pd.read_csv(out / "tune.csv")
     # quadtree: 7 capacities + 7 depths; sap: 3 axes + 3 sweeps + 3 strips; at both sizes.
-    assert len(rows) == 2 * (7 + 7 + 2 + 3 + 3 + 3 + 2)  # + the best again and the default, per backend
+    assert (~rows.param.isin(["best", "default"])).sum() == 2 * (7 + 7 + 3 + 3 + 3)
+    # The defaults, per backend and size; the best again too, unless the sweep's best is the
+    # defaults themselves (which one wins is the machine's to say).
+    assert (rows.param == "default").sum() == 2 * 2 and (rows.param == "best").sum() <= 2 * 2
     assert set(rows.n) == {64, 128} and (rows.status == "ok").all()
     best = pd.read_csv(out / "best.csv")
     assert set(best.param) == {"capacity", "max_depth", "axis", "sweep", "strips"}
