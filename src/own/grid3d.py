@@ -219,6 +219,15 @@ def grid3_pairs_chunked(start, ids, centres, radii, skey, layout, bufs):
     return counts, tests
 
 
+def cube_keys(positions: np.ndarray, layout: np.ndarray) -> np.ndarray:
+    """The key of the cube holding each centre, derived in numpy apart from the kernels' cube_key,
+    for the validate checks."""
+    w, layer = int(layout[NX]) + 2, (int(layout[NY]) + 2) * (int(layout[NX]) + 2)
+    cell = np.clip(np.floor((positions - layout[OX:OZ + 1]) * (1.0 / layout[SIDE])), 0,
+                   layout[NX:NZ + 1] - 1).astype(np.int64)
+    return cell[:, 2] * layer + (cell[:, 1] + 1) * w + cell[:, 0] + 1
+
+
 def grid3_box_pairs(positions: np.ndarray, radii: np.ndarray) -> np.ndarray:
     """Every pair whose boxes overlap (closed intervals), (i, j) with i < j, in no particular order."""
     if len(positions) < 2:
@@ -285,18 +294,16 @@ class Cubes:
         assert np.array_equal(centres.T, self.positions[ids]) and np.array_equal(sradii, self.radii[ids]), \
             "slot centres or radii are not their objects'"
         assert 2.0 * self.radii.max(initial=0.0) <= self.layout[SIDE], "an object is wider than a cell"
-        w, layer = int(self.layout[NX]) + 2, (int(self.layout[NY]) + 2) * (int(self.layout[NX]) + 2)
-        cell = np.clip(np.floor((self.positions[ids] - self.layout[OX:OZ + 1]) * (1.0 / self.layout[SIDE])), 0,
-                       self.layout[NX:NZ + 1] - 1).astype(np.int64)
-        assert np.array_equal(skey, cell[:, 2] * layer + (cell[:, 1] + 1) * w + cell[:, 0] + 1), \
+        assert np.array_equal(skey, cube_keys(self.positions[ids], self.layout)), \
             "an object is not in the cell holding its centre"
 
 
 class CubesForSpheres:
     """Mixin, first in the bases of our grids (own.grid, own.grid_incremental, own.grid_parallel):
     over spheres the frame is new_cubes()' work (Cubes, with `cube_chunks()` parts searched in
-    parallel, 0: one thread; own.grid_incremental's kept candidates); over circles the grid's own. Statics and spawning of spheres take the interface's
-    generic way, and `p` and `cell` are refused there in one line."""
+    parallel, 0: one thread; own.grid_incremental's kept candidates); over circles the grid's own.
+    Statics and spawning of spheres take the interface's generic way, and `p` and `cell` are
+    refused there in one line."""
 
     dims = (2, 3)
     _cubes: Cubes | None = None

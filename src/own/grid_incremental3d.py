@@ -19,7 +19,7 @@ import numba as nb
 import numpy as np
 
 from .common import PairCollector, one_radius, radius_of
-from .grid3d import NX, NY, NZ, SIDE, cube_key, cube_space, grid3_layout
+from .grid3d import NX, NY, NZ, SIDE, cube_key, cube_keys, cube_space, grid3_layout
 from .grid_incremental import (LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT, _add,
                                drop_moved, link_runs, move, new_state, unpack)
 
@@ -232,8 +232,8 @@ class IncrementalCubes:
         assert np.array_equal(okey[perm], rkey), "the objects' keys are not their ranks' keys"
         assert np.array_equal(xyz, self.positions[perm]) and np.array_equal(sr, self.radii[perm]), \
             "rank centres or radii are not their objects'"
-        keys = np.array([cube_key(*p, space) for p in self.positions], dtype=np.int64)
-        assert np.array_equal(okey, keys), "an object is not keyed by the cube holding its centre"
+        assert np.array_equal(okey, cube_keys(self.positions, self.layout)), \
+            "an object is not keyed by the cube holding its centre"
         assert 2.0 * self.radii.max(initial=0.0) <= self.layout[SIDE], "an object is wider than a cube"
         listed = np.zeros(n, dtype=np.int64)
         for c in np.flatnonzero(self._head >= 0):
