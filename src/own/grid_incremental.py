@@ -449,8 +449,10 @@ class IncrementalSquares(StaticsApart, CellLayout):
 
 
 class IncrementalGrid(CubesForSpheres, IncrementalSquares):
-    """own.grid_incremental: over circles IncrementalSquares, over spheres the same bookkeeping
-    over cubes (own/grid_incremental3d.py). `p` and `cell` are taken over circles only."""
+    """Uniform grid that keeps its candidate pairs between frames; over spheres, cubes.
+
+    Over circles IncrementalSquares; over spheres the same bookkeeping over cubes
+    (own/grid_incremental3d.py). `p` and `cell` are taken over circles only."""
 
     def new_cubes(self, radii):
         from .grid_incremental3d import IncrementalCubes  # imported here: it builds on this module's kernels
