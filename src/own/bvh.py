@@ -27,8 +27,8 @@ from .coherent import box_frame
 from .morton import interleave, interleave3
 from .small import SmallScenes
 from .statics import StaticsApart
-from .tree import END, START, MortonTree, add_children, new_table, split_at_highest_bit, tree_builder
-from .tree3d import cube_frame, tree_builder3
+from .tree import END, START, MortonTree, add_children, build_tree, new_table, split_at_highest_bit
+from .tree3d import build_tree3, cube_frame
 
 MORTON_BITS = 16  # per axis: 2^16 lattice steps over the lattice square
 
@@ -87,7 +87,11 @@ def bvh_nodes(codes, depth, leaf_size):
     return nodes[:count]
 
 
-bvh_build = tree_builder(centre_codes, bvh_nodes)
+@nb.njit(cache=True)
+def bvh_build(positions, radii, last_order, order, work, box, frame, repair, depth, capacity):
+    """own/tree.py's build_tree with the radix tree's kernels."""
+    return build_tree(centre_codes, bvh_nodes, positions, radii, last_order, order, work, box, frame, repair,
+                      depth, capacity)
 
 
 @nb.njit(cache=True)
@@ -107,7 +111,11 @@ def centre_codes3(xyz, sr, x0, y0, z0, size, depth, codes):
         codes[i] = interleave3(qx, qy, qz)
 
 
-bvh_build3 = tree_builder3(centre_codes3, bvh_nodes)
+@nb.njit(cache=True)
+def bvh_build3(positions, radii, last_order, order, work, box, frame, repair, depth, capacity):
+    """bvh_build over spheres (own/tree3d.py's build_tree3)."""
+    return build_tree3(centre_codes3, bvh_nodes, positions, radii, last_order, order, work, box, frame, repair,
+                       depth, capacity)
 
 
 @nb.njit(cache=True)

@@ -35,8 +35,8 @@ from engines.knobs import Knob, fixed
 from .morton import bit_length, interleave, interleave3
 from .small import SmallScenes
 from .statics import StaticsApart
-from .tree import END, START, MortonTree, add_children, new_table, split_at_highest_bit, tree_builder
-from .tree3d import tree_builder3
+from .tree import END, START, MortonTree, add_children, build_tree, new_table, split_at_highest_bit
+from .tree3d import build_tree3
 
 # Keys are (Morton code of the cell, padded to depth D) << LEVEL_BITS | depth: 2 D + 5 bits.
 LEVEL_BITS = 5
@@ -115,7 +115,11 @@ def loose_nodes(dim: int):
 quadtree_nodes = loose_nodes(2)
 
 
-quadtree_build = tree_builder(quadtree_keys, quadtree_nodes)
+@nb.njit(cache=True)
+def quadtree_build(positions, radii, last_order, order, work, box, frame, repair, depth, capacity):
+    """own/tree.py's build_tree with the loose quadtree's kernels."""
+    return build_tree(quadtree_keys, quadtree_nodes, positions, radii, last_order, order, work, box, frame, repair,
+                      depth, capacity)
 
 # Over spheres: three code bits a level, 3 D + 5 key bits.
 MAX_DEPTH_3D = 19
@@ -150,7 +154,14 @@ def octree_keys(xyz, sr, x0, y0, z0, size, depth, keys):
         keys[a] = (interleave3(qx, qy, qz) << np.uint64(LEVEL_BITS)) | level
 
 
-octree_build = tree_builder3(octree_keys, loose_nodes(3))
+octree_nodes = loose_nodes(3)
+
+
+@nb.njit(cache=True)
+def octree_build(positions, radii, last_order, order, work, box, frame, repair, depth, capacity):
+    """quadtree_build over spheres (own/tree3d.py's build_tree3)."""
+    return build_tree3(octree_keys, octree_nodes, positions, radii, last_order, order, work, box, frame, repair,
+                       depth, capacity)
 
 
 class Quadtree(StaticsApart, SmallScenes, MortonTree):

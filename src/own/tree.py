@@ -2,7 +2,7 @@
 frame to frame, the node table, its bounds and the pair search.
 
 Objects are sorted by a key that starts with the Morton code of a lattice cell (each tree has its
-own key kernel, see tree_builder), so that every subtree is one contiguous slice of the sorted objects.
+own key kernel, see build_tree), so that every subtree is one contiguous slice of the sorted objects.
 The node table has columns START, END (the node's slice) and CHILD: a binary tree whose two
 children, CHILD and CHILD + 1, are allocated side by side after their parent, NO_CHILD in a leaf,
 whose slice is its objects. Every object is in exactly one leaf. Node bounds are the exact
@@ -59,37 +59,40 @@ def set_box(box, a, x, y, r):
     box[0, a], box[1, a], box[2, a], box[3, a] = x - r, x + r, y - r, y + r
 
 
-def tree_builder(key_kernel, node_kernel):
-    """A tree's compiled build from its two kernels: `key_kernel(xy, sr, x0, y0, size, depth,
-    keys)` writes each object's key on the lattice square (x0, y0, size), and
-    `node_kernel(keys, depth, capacity)` builds the node table over the sorted keys. (Compiled
-    with the kernels in it: a kernel handed over as an argument costs 10 us a call to dispatch.)"""
+# How a tree's kernels reach its build and search: each tree has one cached module-level function
+# per dimension that calls the generic body below with its kernels as globals (bvh_build in
+# own/bvh.py). The body is compiled into that caller, with the kernels inlined. Not a factory of
+# closures: numba keys the cache of a closure by its captured kernels pickled with a per-process
+# id, so it compiled again in every process (3.5 s a tree) and added files to the cache each time;
+# and a kernel handed over from Python costs 10 us a call to dispatch.
 
-    @nb.njit(cache=True)
-    def build(positions, radii, last_order, order, work, box, frame, repair, depth, capacity):
-        """This frame's sorted order into `order` and the boxes in that order into `box` (rows
-        lx, hx, ly, hy); returns the node table, the node bounds (x0, y0, x1, y1) and the
-        insertion-sort swaps (-1 after a sort from scratch). The objects are taken in last frame's
-        order (`last_order`, its first entry -1 before the first frame), where their keys are
-        almost sorted (own/coherent.py); `work` (centres, radii, keys, permutation) is the
-        caller's, reused from frame to frame, and so is `frame`, the lattice square, updated in
-        place."""
-        n = positions.shape[0]
-        xy, sr, keys, perm = work
-        fresh = n == 0 or last_order[0] < 0
-        gather(positions, radii, np.arange(n) if fresh else last_order, xy, sr)
-        x0, y0, size = lattice_frame(xy, sr, frame)
-        frame[0], frame[1], frame[2] = x0, y0, size
-        key_kernel(xy, sr, x0, y0, size, depth, keys)
-        swaps = resort(keys, perm, repair and not fresh)
-        for a in range(n):  # perm is almost the identity: near-sequential reads
-            j = perm[a]
-            order[a] = j if fresh else last_order[j]
-            set_box(box, a, xy[j, 0], xy[j, 1], sr[j])
-        nodes = node_kernel(keys, depth, capacity)
-        return nodes, tree_bounds(nodes, box), swaps
 
-    return build
+@nb.njit(inline="always")
+def build_tree(key_kernel, node_kernel, positions, radii, last_order, order, work, box, frame, repair, depth,
+               capacity):
+    """This frame's sorted order into `order` and the boxes in that order into `box` (rows lx, hx,
+    ly, hy); returns the node table, the node bounds (x0, y0, x1, y1) and the insertion-sort swaps
+    (-1 after a sort from scratch). `key_kernel(xy, sr, x0, y0, size, depth, keys)` writes each
+    object's key on the lattice square (x0, y0, size), `node_kernel(keys, depth, capacity)` builds
+    the node table over the sorted keys. The objects are taken in last frame's order
+    (`last_order`, its first entry -1 before the first frame), where their keys are almost sorted
+    (own/coherent.py); `work` (centres, radii, keys, permutation) is the caller's, reused from
+    frame to frame, and so is `frame`, the lattice square, updated in place. (Not cached itself:
+    its kernels are part of its signature, see above.)"""
+    n = positions.shape[0]
+    xy, sr, keys, perm = work
+    fresh = n == 0 or last_order[0] < 0
+    gather(positions, radii, np.arange(n) if fresh else last_order, xy, sr)
+    x0, y0, size = lattice_frame(xy, sr, frame)
+    frame[0], frame[1], frame[2] = x0, y0, size
+    key_kernel(xy, sr, x0, y0, size, depth, keys)
+    swaps = resort(keys, perm, repair and not fresh)
+    for a in range(n):  # perm is almost the identity: near-sequential reads
+        j = perm[a]
+        order[a] = j if fresh else last_order[j]
+        set_box(box, a, xy[j, 0], xy[j, 1], sr[j])
+    nodes = node_kernel(keys, depth, capacity)
+    return nodes, tree_bounds(nodes, box), swaps
 
 
 @nb.njit(cache=True)
@@ -190,73 +193,71 @@ def _leaf_cross(order, box, bounds, nodes, u, v, buf, count):
     return count
 
 
-def pair_search(meet, leaf_self, leaf_cross):
-    """The compiled pair search of a tree from its box primitives (over circles here; over spheres
-    in own/tree3d.py): `meet(bounds, u, v)`, whether two nodes' bounds meet, `leaf_self` and
-    `leaf_cross`, the pairs within a leaf and between two leaves. (Compiled with them in it, as
-    tree_builder's build is.)"""
+@nb.njit(inline="always")
+def search_tree(meet, leaf_self, leaf_cross, order, box, nodes, bounds, buf):
+    """Box-overlap pairs of a tree into buf, each once; returns (pairs found, node pairs visited).
+    The box primitives make it a search over circles (here) or spheres (own/tree3d.py):
+    `meet(bounds, u, v)`, whether two nodes' bounds meet, `leaf_self` and `leaf_cross`, the pairs
+    within a leaf and between two leaves. (Not cached itself, as build_tree.)
 
-    @nb.njit(cache=True)
-    def tree_pairs(order, box, nodes, bounds, buf):
-        """Box-overlap pairs into buf, each once; returns (pairs found, node pairs visited).
-
-        Simultaneous traversal: a node is paired with itself (its children with themselves and
-        with each other) and two overlapping nodes with each other (both split into their four
-        child pairs, or the one that is not a leaf: 5 to 8% faster than splitting the one holding
-        more objects, on the tumbler, smash and the moving pile), so every pair of leaves is
-        reached at most once, by one path from the root, and node pairs whose bounds do not meet
-        are dropped as they are pushed. Against one descent from the root per leaf, measured 2.1x
-        faster on a settled pile at n = 65536 (the descents re-tested the leaf's own ancestors and
-        their neighbours every time)."""
-        count = visited = 0
-        if nodes.shape[0] == 0:
-            return count, visited
-        stack = np.empty((256, 2), dtype=np.int64)
-        stack[0, 0], stack[0, 1] = 0, 0
-        top = 1
-        while top > 0:
-            top -= 1
-            u, v = stack[top, 0], stack[top, 1]
-            visited += 1
-            if top + 4 > stack.shape[0]:
-                stack = np.concatenate((stack, np.empty_like(stack)))
-            if u == v:
-                left = nodes[u, CHILD]
-                if left == NO_CHILD:
-                    count = leaf_self(order, box, nodes[u, START], nodes[u, END], buf, count)
-                    continue
-                stack[top, 0], stack[top, 1] = left, left
-                stack[top + 1, 0], stack[top + 1, 1] = left + 1, left + 1
-                top += 2
-                if meet(bounds, left, left + 1):
-                    stack[top, 0], stack[top, 1] = left, left + 1
-                    top += 1
-                continue
-            u_leaf, v_leaf = nodes[u, CHILD] == NO_CHILD, nodes[v, CHILD] == NO_CHILD
-            if u_leaf and v_leaf:
-                count = leaf_cross(order, box, bounds, nodes, u, v, buf, count)
-                continue
-            if not u_leaf and not v_leaf:
-                u_left, v_left = nodes[u, CHILD], nodes[v, CHILD]
-                for u_child in (u_left, u_left + 1):
-                    for v_child in (v_left, v_left + 1):
-                        if meet(bounds, u_child, v_child):
-                            stack[top, 0], stack[top, 1] = u_child, v_child
-                            top += 1
-                continue
-            if u_leaf:  # split the one that is not a leaf
-                u, v = v, u
-            left = nodes[u, CHILD]
-            for child in (left, left + 1):
-                if meet(bounds, child, v):
-                    stack[top, 0], stack[top, 1] = child, v
-                    top += 1
+    Simultaneous traversal: a node is paired with itself (its children with themselves and
+    with each other) and two overlapping nodes with each other (both split into their four
+    child pairs, or the one that is not a leaf: 5 to 8% faster than splitting the one holding
+    more objects, on the tumbler, smash and the moving pile), so every pair of leaves is
+    reached at most once, by one path from the root, and node pairs whose bounds do not meet
+    are dropped as they are pushed. Against one descent from the root per leaf, measured 2.1x
+    faster on a settled pile at n = 65536 (the descents re-tested the leaf's own ancestors and
+    their neighbours every time)."""
+    count = visited = 0
+    if nodes.shape[0] == 0:
         return count, visited
+    stack = np.empty((256, 2), dtype=np.int64)
+    stack[0, 0], stack[0, 1] = 0, 0
+    top = 1
+    while top > 0:
+        top -= 1
+        u, v = stack[top, 0], stack[top, 1]
+        visited += 1
+        if top + 4 > stack.shape[0]:
+            stack = np.concatenate((stack, np.empty_like(stack)))
+        if u == v:
+            left = nodes[u, CHILD]
+            if left == NO_CHILD:
+                count = leaf_self(order, box, nodes[u, START], nodes[u, END], buf, count)
+                continue
+            stack[top, 0], stack[top, 1] = left, left
+            stack[top + 1, 0], stack[top + 1, 1] = left + 1, left + 1
+            top += 2
+            if meet(bounds, left, left + 1):
+                stack[top, 0], stack[top, 1] = left, left + 1
+                top += 1
+            continue
+        u_leaf, v_leaf = nodes[u, CHILD] == NO_CHILD, nodes[v, CHILD] == NO_CHILD
+        if u_leaf and v_leaf:
+            count = leaf_cross(order, box, bounds, nodes, u, v, buf, count)
+            continue
+        if not u_leaf and not v_leaf:
+            u_left, v_left = nodes[u, CHILD], nodes[v, CHILD]
+            for u_child in (u_left, u_left + 1):
+                for v_child in (v_left, v_left + 1):
+                    if meet(bounds, u_child, v_child):
+                        stack[top, 0], stack[top, 1] = u_child, v_child
+                        top += 1
+            continue
+        if u_leaf:  # split the one that is not a leaf
+            u, v = v, u
+        left = nodes[u, CHILD]
+        for child in (left, left + 1):
+            if meet(bounds, child, v):
+                stack[top, 0], stack[top, 1] = child, v
+                top += 1
+    return count, visited
 
-    return tree_pairs
 
-
-tree_pairs = pair_search(_meet, _leaf_self, _leaf_cross)
+@nb.njit(cache=True)
+def tree_pairs(order, box, nodes, bounds, buf):
+    """search_tree over circles."""
+    return search_tree(_meet, _leaf_self, _leaf_cross, order, box, nodes, bounds, buf)
 
 
 class MortonTree(BroadPhase):
@@ -264,9 +265,10 @@ class MortonTree(BroadPhase):
     moved past its skin. Where the skin dropped to zero, it keeps its leaves and refits their
     bounds to the exact boxes until they have drifted apart (REFIT_DRIFT; after leaves apart at
     the first refit, it builds REFIT_RETRY frames before trying again). A subclass sets `build`
-    (made by tree_builder), `_depth` and `_capacity`, and has a `coherent` parameter: False sorts
-    from the input order and builds every frame, to measure what coherence saves. Over spheres the
-    tree is the same with `build3` (made by tree3d.tree_builder3) and own/tree3d.py's primitives."""
+    (a cached caller of build_tree with its kernels), `_depth` and `_capacity`, and has a
+    `coherent` parameter: False sorts from the input order and builds every frame, to measure what
+    coherence saves. Over spheres the tree is the same with `build3` (a caller of
+    tree3d.build_tree3) and own/tree3d.py's primitives."""
 
     build = None
     build3 = None

@@ -16,7 +16,7 @@ from numba.cpython.unsafe.numbers import trailing_zeros
 
 from .coherent import FRAME_SLACK, resort
 from .common import emit
-from .tree import CHILD, END, NO_CHILD, START, pair_search
+from .tree import CHILD, END, NO_CHILD, START, search_tree
 
 ROWS = 6  # box rows: lx, hx, ly, hy, lz, hz
 
@@ -137,7 +137,10 @@ def _leaf_cross3(order, box, bounds, nodes, u, v, buf, count):
     return count
 
 
-tree_pairs3 = pair_search(_meet3, _leaf_self3, _leaf_cross3)
+@nb.njit(cache=True)
+def tree_pairs3(order, box, nodes, bounds, buf):
+    """tree.search_tree over spheres."""
+    return search_tree(_meet3, _leaf_self3, _leaf_cross3, order, box, nodes, bounds, buf)
 
 
 @nb.njit(cache=True)
@@ -148,29 +151,26 @@ def gather3(positions, radii, order, xyz, sr):
         xyz[a, 0], xyz[a, 1], xyz[a, 2], sr[a] = positions[i, 0], positions[i, 1], positions[i, 2], radii[i]
 
 
-def tree_builder3(key_kernel, node_kernel):
-    """tree.tree_builder over spheres: `key_kernel(xyz, sr, x0, y0, z0, size, depth, keys)` writes
-    each object's key on the lattice cube, `node_kernel(keys, depth, capacity)` builds the table."""
-
-    @nb.njit(cache=True)
-    def build(positions, radii, last_order, order, work, box, frame, repair, depth, capacity):
-        """As tree_builder's build, with boxes in six rows and the lattice cube in `frame`."""
-        n = positions.shape[0]
-        xyz, sr, keys, perm = work
-        fresh = n == 0 or last_order[0] < 0
-        gather3(positions, radii, np.arange(n) if fresh else last_order, xyz, sr)
-        x0, y0, z0, size = lattice_cube(xyz, sr, frame)
-        frame[0], frame[1], frame[2], frame[3] = x0, y0, z0, size
-        key_kernel(xyz, sr, x0, y0, z0, size, depth, keys)
-        swaps = resort(keys, perm, repair and not fresh)
-        for a in range(n):
-            j = perm[a]
-            order[a] = j if fresh else last_order[j]
-            set_box3(box, a, xyz[j, 0], xyz[j, 1], xyz[j, 2], sr[j])
-        nodes = node_kernel(keys, depth, capacity)
-        return nodes, tree_bounds3(nodes, box), swaps
-
-    return build
+@nb.njit(inline="always")
+def build_tree3(key_kernel, node_kernel, positions, radii, last_order, order, work, box, frame, repair, depth,
+                capacity):
+    """tree.build_tree over spheres: `key_kernel(xyz, sr, x0, y0, z0, size, depth, keys)` writes
+    each object's key on the lattice cube, `node_kernel(keys, depth, capacity)` builds the table;
+    boxes in six rows and the lattice cube in `frame`. (Not cached itself, as build_tree.)"""
+    n = positions.shape[0]
+    xyz, sr, keys, perm = work
+    fresh = n == 0 or last_order[0] < 0
+    gather3(positions, radii, np.arange(n) if fresh else last_order, xyz, sr)
+    x0, y0, z0, size = lattice_cube(xyz, sr, frame)
+    frame[0], frame[1], frame[2], frame[3] = x0, y0, z0, size
+    key_kernel(xyz, sr, x0, y0, z0, size, depth, keys)
+    swaps = resort(keys, perm, repair and not fresh)
+    for a in range(n):
+        j = perm[a]
+        order[a] = j if fresh else last_order[j]
+        set_box3(box, a, xyz[j, 0], xyz[j, 1], xyz[j, 2], sr[j])
+    nodes = node_kernel(keys, depth, capacity)
+    return nodes, tree_bounds3(nodes, box), swaps
 
 
 @nb.njit(cache=True)
