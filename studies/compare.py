@@ -13,7 +13,7 @@ from pathlib import Path
 
 
 import engines
-from scenes import coverage
+from scenes.recorded import Recording
 
 from .lib.cli import Parser, command_line, in_dimension, matched_backends, run_cli, warn_unavailable
 from .lib.figures import error_against_time
@@ -25,13 +25,16 @@ from .lib.pool import Pool
 from .lib.results import RowWriter, cpu_models_note, left_out_note, missed_total, ok_lines, read_rows, summarise
 from .lib.runner import Runner
 from .lib.tables import add_speedup, format_table, ours_against_engines
+from .lib.traits import covering
+
+FRAMES = 30  # timed frames of a generated scene or family, by default
 
 
 def parser() -> Parser:
     p = Parser(prog="python -m studies.compare", description=__doc__.split("\n\n")[0])
     add_scene_options(p)
     add_backends_option(p)
-    add_trial_options(p, frames=30, repeat=3, budget=0.25, timeout=300.0)
+    add_trial_options(p, frames=None, repeat=3, budget=0.25, timeout=300.0)
     add_output_options(p, "compare")
     add_quick_option(p, "3 frames, 1 repeat", frames=3, repeat=1)
     p.add_argument("--check", action="store_true", help="exit status 1 if any backend missed a pair")
@@ -67,7 +70,12 @@ def main(argv: list[str] | None = None) -> int:
         return list_backends(dim_of(args))
     if args.report_only:
         return report(Path(args.out), args.check)
+    if args.frames is None and not args.trajectory:
+        args.frames = FRAMES
     scene = scene_from_args(args)
+    recorded = scene.motion.frames if isinstance(scene.motion, Recording) else None
+    if recorded is not None:  # measured on the frames it has (frame 0 is the warm-up), or on as many as asked
+        args.frames = recorded - 1 if args.frames is None else min(args.frames, recorded - 1)
     chosen = in_dimension(matched_backends(args.backends), scene.dim)
     with Output(args.out, "compare", command_line("compare", argv), args.resume) as out:
         unavailable = warn_unavailable(chosen)
@@ -76,16 +84,20 @@ def main(argv: list[str] | None = None) -> int:
         runner = Runner(writer, out, pool=Pool.from_args(args))
         start = time.perf_counter()
         traj = runner.trajectory(scene, args.frames + 1)  # frame 0 is every backend's warm-up
+        timed = f"{args.frames} timed frames"
+        if recorded is not None:
+            timed += (" (all of the recording's after its first, the warm-up)" if args.frames == recorded - 1
+                      else f" (of the recording's {recorded - 1} after its first: --frames)")
         print(f"scene {scene.name}: n={scene.n}, radii {scene.radius_range[0]:g}..{scene.radius_range[1]:g}, "
-              f"box {scene.box} (the objects' boxes cover {coverage(scene.radii, scene.box):.0%} of it), "
-              f"{args.frames} timed frames x {args.repeat} repeats (trajectory and exact pairs computed once in "
-              f"{time.perf_counter() - start:.1f} s)")
+              f"box {scene.box} ({covering(traj)}), {timed} x {args.repeat} repeats (trajectory and exact pairs "
+              f"computed once in {time.perf_counter() - start:.1f} s)")
         if scene.motion is not None:
             alive = traj.alive.sum(axis=1) if traj.alive is not None else None
             print(f"recorded motion ({scene.motion.record(1).source or scene.meta.get('dist')}): {traj.frames} frames, "
                   f"{scene.static_share:.0%} of the objects static"
                   + (f", {alive.min()} to {alive.max()} of {scene.n} alive per frame" if alive is not None else ""))
         out.meta(scene={**scene_columns(traj.scene), "box": scene.box, "frames": args.frames, "repeats": args.repeat,
+                        "recorded_frames": recorded,
                         "statics_or_spawning": scene.static is not None or traj.alive is not None},
                  unavailable=unavailable)
         jobs = [Job(backend, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout,
@@ -133,8 +145,9 @@ def report(folder: Path, check: bool) -> int:
     print("times: median ±interquartile range over all timed frames and repeats; engine bp: the engine's own measure "
           "of its broad phase (ms), where it reports one;\ncand/true: candidates per truly overlapping pair (1 = no "
           "extra work); missed: truly overlapping pairs (and, for 'boxes' backends,\noverlapping boxes) absent from the "
-          "candidates, summed over frames; setup: first build and warm-up frame (JIT compilation, engine world "
-          "creation)\nof the slowest repeat, not in the timed frames.")
+          "candidates, summed over frames; setup: first build and warm-up frame (engine world creation) of the "
+          "slowest repeat,\nnot in the timed frames; compile: compiling (or loading from the cache) our kernels, "
+          "before the setup and apart from it.")
     for name, status in summary.loc[summary.status != "ok", "status"].items():
         print(f"  {name}: {status}")
     unavailable = meta.get("unavailable", {})
@@ -143,7 +156,8 @@ def report(folder: Path, check: bool) -> int:
     if not complete:
         print(f"INTERRUPTED RUN: these are the rows of {folder}/results.partial.csv; continue it with --resume")
     scene = meta.get("scene", {})
-    title = f"{scene.get('scene', '?')}: n={scene.get('n', '?')}, {scene.get('frames', '?')} frames x " \
+    of = f" of {scene['recorded_frames'] - 1}" if scene.get("recorded_frames") else ""
+    title = f"{scene.get('scene', '?')}: n={scene.get('n', '?')}, {scene.get('frames', '?')}{of} frames x " \
             f"{scene.get('repeats', '?')} repeats"
     written = [str(folder / ("results.csv" if complete else "results.partial.csv")), str(folder / "meta.json")]
     if len(summary):

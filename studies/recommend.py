@@ -30,7 +30,7 @@ from .lib.output import Output, read_meta, write_json
 from .lib.pool import Pool
 from .lib.results import RowWriter, stored_runs
 from .lib.runner import Runner
-from .lib.traits import Traits, measure_traits
+from .lib.traits import CLUMPED, MIXED_SPREAD, Traits, measure_traits
 from .lib.trials import Trial, warm_up
 from .lib.tuning import tunable, tune_backend
 
@@ -192,13 +192,14 @@ def why(win: Entry, runner: Entry | None, traits: Traits) -> str:
     method = engines.backend_class(win.backend).method if win.backend in engines.available() else ""
     reasons = []
     if method in ("grid", "hash"):
-        reasons.append("radii are similar enough for one cell size" if traits.radius_spread < 10
+        reasons.append("radii are similar enough for one cell size" if traits.radius_spread < MIXED_SPREAD
                        else "big objects go to their own bucket, so the cells stay small")
     if method == "sweep":
         reasons.append("objects move little per frame, so the sorted order is nearly kept"
                        if traits.step_in_radii < 0.5 else "a sort along the spread axis separates them well")
     if method in ("tree", "kdtree"):
-        reasons.append("a tree adapts to the mixed sizes and clumps" if traits.radius_spread >= 10 or traits.dispersion >= 3
+        reasons.append("a tree adapts to the mixed sizes and clumps"
+                       if traits.radius_spread >= MIXED_SPREAD or traits.dispersion >= CLUMPED
                        else "a tree needs no size parameter")
     recorded = traits.recorded_words()
     if recorded:
@@ -390,7 +391,7 @@ def main(argv: list[str] | None = None) -> int:
             if time.perf_counter() > trials_deadline:
                 skipped.append(backend)
                 continue
-            warm_up(backend)
+            warm_up(backend, scene.dim)
             best = min((e.trial.median_ms for e in entries if e.eligible), default=float("inf"))
             entries.append(trials.sized(backend, budget=max(0.05, HOPELESS * best / 1e3), share=len(backends) - k))
             t = entries[-1].trial

@@ -41,6 +41,7 @@ OUTCOME_COLOURS = ["#2ca02c", "#98df8a", "#d62728", "#9467bd", "#ff7f0e", "#0000
 # tunneling), so that a smoke run of every backend ends within two minutes.
 QUICK_SCENES = ("lattice_square", "shift_1e9", "radius_zero", "fast_movers")
 SCENES, LARGEST_N = "scenes", "largest n"  # the study's two experiments, as its rows name them
+FIRST_N = 1024  # the largest-n search doubles n from here
 
 
 def classify(line: pd.Series) -> tuple[str, str]:
@@ -78,7 +79,7 @@ def outcomes_table(rows: pd.DataFrame) -> pd.DataFrame:
 def largest_n(runner: Runner, backends: list[str], args) -> None:
     """Per backend, double n (uniform scenes at the essay's density) while one frame stays within
     the budget."""
-    sizes = [n for n in (1024 << k for k in range(40)) if n <= args.max_n]
+    sizes = [n for n in (FIRST_N << k for k in range(40)) if n <= args.max_n]
     scenes = {n: at_essay_density("uniform", n, dim=dim_of(args)) for n in sizes}
     runner.run_chains([[Job(backend, budget_s=args.budget, timeout_s=args.timeout, memory_mb=args.memory,
                             scene=scenes[n], frames=1, tag={"experiment": LARGEST_N}) for n in sizes]
@@ -202,8 +203,10 @@ def parser() -> Parser:
     add_dim_option(p)
     add_scene_file_option(p)
     add_trial_options(p, frames=10, repeat=1, budget=0.5, timeout=60.0, memory=4096.0)
-    p.add_argument("--max-n", type=int, default=1 << 18, help="cap of the largest-n search (default 2^18)")
-    p.add_argument("--save-scenes", metavar="DIR", help="also write every stress scene as a scene file")
+    p.add_argument("--max-n", type=int, default=1 << 18,
+                   help=f"cap of the largest-n search, which doubles n from {FIRST_N} (default 2^18)")
+    p.add_argument("--save-scenes", metavar="DIR",
+                   help="write every stress scene --scenes names as a scene file into DIR and stop (nothing is run)")
     add_quick_option(p, f"the scenes {', '.join(QUICK_SCENES)}, 3 frames each, the largest-n search at n = 1024 "
                         "only", scenes=",".join(QUICK_SCENES), frames=3, max_n=1024)
     add_output_options(p, "stress", report_dir="docs/, or OUT with --quick")
@@ -211,7 +214,10 @@ def parser() -> Parser:
 
 
 def parse(argv: list[str] | None):
-    return parse_checked(parser(), argv)
+    args = parse_checked(parser(), argv)
+    if args.max_n < FIRST_N:
+        raise CliError(f"--max-n must be at least {FIRST_N} (the largest-n search starts there), got {args.max_n}")
+    return args
 
 
 def tunneling_figure(table: pd.DataFrame, path: Path, scene: str = "fast_movers") -> bool:
@@ -260,6 +266,18 @@ def chosen_scenes(args) -> list[Scene]:
     return [known[n]() for n in names] + ([given] if given is not None else [])
 
 
+def save_scenes(scenes: list[Scene], folder: Path) -> int:
+    """Every scene as a scene file in `folder` (the study is not run)."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        for scene in scenes:
+            save_scene(scene, folder / f"{scene.name}.csv")
+    except OSError as exc:
+        raise CliError(f"cannot write the scenes into {folder}: {exc.strerror or exc}") from None
+    print(f"wrote {len(scenes)} scene files into {folder}: {', '.join(s.name + '.csv' for s in scenes)}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     if args.report_only:
@@ -270,16 +288,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"wrote {path}")
         return 0
     scenes = chosen_scenes(args)
+    if args.save_scenes:
+        return save_scenes(scenes, Path(args.save_scenes))
     dim = scenes[0].dim
     args.dim = dim
     backends = in_dimension(matched_backends(args.backends), dim)
     with Output(args.out, "stress", command_line("stress", argv), args.resume) as out:
         report_dir = report_folder(args, out.path)
-        if args.save_scenes:
-            folder = Path(args.save_scenes)
-            folder.mkdir(parents=True, exist_ok=True)
-            for scene in scenes:
-                save_scene(scene, folder / f"{scene.name}.csv")
         missing = warn_unavailable(backends)
         backends = [b for b in backends if b not in missing]
         writer = RowWriter(out.path, args.resume)

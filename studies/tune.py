@@ -146,7 +146,7 @@ def run_tune(runner: Runner, scene: Scene, backends: list[str], args, exact_only
     `exact_only`, only the knobs of EXACT_KNOBS are swept where a backend is listed there."""
     results = []
     for backend in backends:
-        warm_up(backend)
+        warm_up(backend, scene.dim)
 
         def measure(params, step, backend=backend):
             frames = max(args.frames, frames_needed(engines.backend_class(backend).sweeps, params))

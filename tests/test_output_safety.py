@@ -33,6 +33,14 @@ BAD_INPUTS = [
     ("scenes", ["--backends", "nosuch.*"]),
     ("show", ["--backends", "own.grid", "--scene", "{nan}"]),
     ("bench", ["--seconds", "-1"]),
+    ("stress", ["--max-n", "0"]),
+    ("stress", ["--max-n", "-5"]),
+    ("compare", ["--trajectory", "{empty}"]),
+    ("recommend", ["--trajectory", "{empty}"]),
+    ("tune", ["--trajectory", "{empty}"]),
+    ("show", ["--backends", "own.grid", "--trajectory", "{empty}"]),
+    ("tradeoff", ["--trajectory", "{empty}"]),
+    ("stress", ["--trajectory", "{empty}"]),
 ]
 
 
@@ -40,16 +48,17 @@ def snapshot(folder: Path) -> dict[str, bytes]:
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
-@pytest.mark.parametrize("study, argv", BAD_INPUTS, ids=[f"{s}-{a[0]}-{a[1][:8]}" for s, a in BAD_INPUTS])
+@pytest.mark.parametrize("study, argv", BAD_INPUTS, ids=[f"{s}-{a[-2]}-{a[-1][:8]}" for s, a in BAD_INPUTS])
 def test_bad_input_leaves_a_finished_out_folder_as_it_was(tmp_path, study, argv):
     finished = tmp_path / "finished"
     finished.mkdir()
     (finished / "results.csv").write_text("backend,status\nown.grid,ok\n")
     (finished / "meta.json").write_text(json.dumps({"command": "an earlier run", "elapsed_s": 12.0}))
     before = snapshot(finished)
-    nan = tmp_path / "nan.csv"
+    nan, empty = tmp_path / "nan.csv", tmp_path / "empty.npz"
     nan.write_text(NAN_SCENE)
-    args = [a.format(nan=nan) for a in argv]
+    empty.write_bytes(b"")  # a 0-byte trajectory
+    args = [a.format(nan=nan, empty=empty) for a in argv]
     done = subprocess.run([sys.executable, "-m", f"studies.{study}", *args, "--out", str(finished)], cwd=tmp_path,
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 2, done.stderr[-2000:]

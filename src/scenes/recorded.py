@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -151,8 +152,8 @@ def _read_npz(path: Path) -> dict:
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {k: data[k] for k in data.files}
-    except (OSError, ValueError) as exc:
-        raise TrajectoryFileError(f"{path}: not a readable .npz file ({exc})") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:  # an empty file: EOFError
+        raise TrajectoryFileError(f"{path}: not a readable .npz file ({exc or 'it is empty'})") from None
     missing = [k for k in ("positions", "radii") if k not in arrays]
     unknown = sorted(set(arrays) - {"positions", "radii", "alive", "static", "box"})
     if missing or unknown:

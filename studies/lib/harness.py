@@ -37,9 +37,14 @@ from own.reference import narrow_phase
 from scenes import Scene
 from scenes.motion import Trajectory
 
+from .compiling import CompileClock, sample_of, warm_up
+
 
 SETUP_BUDGETS = 100.0  # the setup limit in budgets per frame
 SETUP_FLOOR_S = 30.0
+# Compiling a backend's kernels comes before its clock starts, under a limit of its own: a cold
+# cache takes 10 to 60 s for one of ours on a loaded 2-core machine.
+COMPILE_LIMIT_S = 900.0
 
 
 @dataclass
@@ -70,8 +75,8 @@ class Job:
     @property
     def setup_limit_s(self) -> float:
         """How long building the backend and its warm-up frame may take: SETUP_BUDGETS times the
-        budget per frame, at least SETUP_FLOOR_S (JIT compilation, an engine's world), at most the
-        timeout. Without it a hopeless backend (brute force at n = 10^7) spent all of its timeout
+        budget per frame, at least SETUP_FLOOR_S (an engine's world), at most the timeout. (Our
+        kernels are compiled before it starts, see compiling.py.) Without it a hopeless backend (brute force at n = 10^7) spent all of its timeout
         before its first timed frame could be judged."""
         return min(self.timeout_s, max(SETUP_FLOOR_S, SETUP_BUDGETS * self.budget_s))
 
@@ -132,9 +137,11 @@ def _checked(candidates: np.ndarray, n: int) -> np.ndarray:
     return candidates
 
 
-def measure(job: Job, traj: Trajectory, repeat: int, ready: Callable[[], None] | None = None) -> list[dict[str, Any]]:
-    """Rows for one repeat: frame 0 is the untimed warm-up (build, JIT compile), then frames 1..F;
-    `ready()` is called once the warm-up is done.
+def measure(job: Job, traj: Trajectory, repeat: int, ready: Callable[[], None] | None = None,
+            clock: CompileClock | None = None, compiled_s: float = 0.0) -> list[dict[str, Any]]:
+    """Rows for one repeat: frame 0 is the untimed warm-up (build), then frames 1..F; `ready()` is
+    called once the warm-up is done. `compiled_s`: the seconds spent compiling before it; any
+    compilation `clock` sees during the build counts there too, not in the setup.
 
     A first timed frame over the job's budget is kept with a "skipped" status and ends the repeat.
     """
@@ -142,12 +149,14 @@ def measure(job: Job, traj: Trajectory, repeat: int, ready: Callable[[], None] |
     backend = engines.create(job.backend, **job.params)
     failed = True
     try:
+        compiling = clock.seconds if clock else 0.0
         start = time.perf_counter()
         backend.reset(traj.positions[0], radii, static=traj.scene.static, alive=traj.alive_at(0))
         backend.update(traj.positions[0])
         first = _checked(backend.pairs(), traj.scene.n)
         narrow_phase(traj.positions[0], radii, first)
-        setup = time.perf_counter() - start
+        compiling = (clock.seconds if clock else 0.0) - compiling
+        setup = time.perf_counter() - start - compiling
         if ready:
             ready()
         rows = []
@@ -170,6 +179,7 @@ def measure(job: Job, traj: Trajectory, repeat: int, ready: Callable[[], None] |
                 rows.append({
                     "repeat": repeat, "frame": f, "t_update_s": t1 - t0, "t_pairs_s": t2 - t1,
                     "t_narrow_s": t4 - t3, "t_total_s": (t2 - t0) + (t4 - t3), "t_setup_s": setup,
+                    "t_compile_s": compiled_s + compiling,
                     "t_engine_broadphase_s": backend.engine_broadphase_s(),
                     "reports": backend.reports, "params": backend.describe(), "status": "ok",
                     "stats": json.dumps(backend.stats(), default=float),
@@ -240,14 +250,20 @@ def _child(job: Job, traj: Trajectory, conn, parent_pid: int, scratch: str) -> N
         mapped = int(Path("/proc/self/statm").read_text().split()[0]) * resource.getpagesize()
         resource.setrlimit(resource.RLIMIT_AS, (mapped + int(job.memory_mb * 2**20), resource.RLIM_INFINITY))
     try:
-        for r in range(job.repeats):
-            rows = measure(job, traj, r, (lambda: conn.send(("ready", None))) if r == 0 else None)
-            conn.send(("rows", rows))
-            if rows and rows[-1]["status"] != "ok":  # over budget: no further repeats
-                # The repeats before it stand: say so, or a table row would contradict its note.
-                kept = f" (in repeat {r + 1} of {job.repeats}; earlier repeats' rows are kept)" if r else ""
-                conn.send(("failed", rows[-1]["status"] + kept))
-                return
+        with CompileClock() as clock:
+            # Before the job's clock starts (the parent's limits count from "compiled").
+            sample = sample_of(traj.positions[0], traj.scene.radii, traj.scene.static, traj.alive_at(0))
+            compiled_s = warm_up(job.backend, job.params, traj.scene.dim, sample)
+            conn.send(("compiled", None))
+            for r in range(job.repeats):
+                rows = measure(job, traj, r, (lambda: conn.send(("ready", None))) if r == 0 else None, clock,
+                               compiled_s if r == 0 else 0.0)
+                conn.send(("rows", rows))
+                if rows and rows[-1]["status"] != "ok":  # over budget: no further repeats
+                    # The repeats before it stand: say so, or a table row would contradict its note.
+                    kept = f" (in repeat {r + 1} of {job.repeats}; earlier repeats' rows are kept)" if r else ""
+                    conn.send(("failed", rows[-1]["status"] + kept))
+                    return
         conn.send(("done", None))
     except InvalidOutput as exc:
         conn.send(("failed", f"invalid output: {exc}"))
@@ -304,12 +320,17 @@ def run_isolated(job: Job, traj: Trajectory, on_rows: Callable[[list[dict]], Non
     child.close()
     rows: list[dict] = []
     status = None
-    start = time.monotonic()
-    deadline = start + job.timeout_s
-    setup_deadline = start + job.setup_limit_s if job.setup_limit_s < job.timeout_s else None
+    # Until the child says its kernels are compiled, only the compile limit applies; the job's
+    # timeout and setup limit count from then.
+    deadline = time.monotonic() + COMPILE_LIMIT_S
+    setup_deadline = None
+    compiling = True
     try:
         while status is None:
             now = time.monotonic()
+            if compiling and now >= deadline:
+                status = f"timeout: compiling its kernels took over {COMPILE_LIMIT_S:g} s"
+                break
             if setup_deadline is not None and now >= setup_deadline:
                 status = (f"skipped: building it and its warm-up frame took over {job.setup_limit_s:.3g} s, "
                           f"{SETUP_BUDGETS:g} times the budget per frame")
@@ -328,7 +349,11 @@ def run_isolated(job: Job, traj: Trajectory, on_rows: Callable[[list[dict]], Non
                 proc.join()
                 status = _crash_status(proc.exitcode)
                 break
-            if kind == "ready":
+            if kind == "compiled":
+                compiling, start = False, time.monotonic()
+                deadline = start + job.timeout_s
+                setup_deadline = start + job.setup_limit_s if job.setup_limit_s < job.timeout_s else None
+            elif kind == "ready":
                 setup_deadline = None
             elif kind == "rows":
                 rows += payload

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import dataclasses
 import logging
 import os
 import platform
@@ -27,7 +28,7 @@ from urllib.parse import urlsplit
 import engines
 
 from .cli import CliError
-from .harness import Job, Outcome, run_isolated
+from .harness import Job, Outcome, run_isolated, scene_id
 from .output import cpu_model
 from . import trajectories
 
@@ -81,9 +82,12 @@ def uses_all_cores(job: Job) -> bool:
     return engines.uses_every_core(job.backend, job.params)
 
 
-def execute(job: Job, run_id: str) -> Outcome:
+def execute(job: Job, run_id: str, scene=None) -> Outcome:
     """On a worker: the job's scene stepped (or kept from the worker's last jobs), the job run in
-    an isolated child, its outcome with where it ran."""
+    an isolated child, its outcome with where it ran. `scene`: the job's scene where it was sent
+    apart from the job (scattered once, see Pool.submit)."""
+    if scene is not None:
+        job = dataclasses.replace(job, scene=scene)
     try:
         from distributed import get_worker
         from distributed.utils import sync
@@ -111,6 +115,7 @@ class Pool:
         self.retried: list[str] = []  # jobs started more than once (a worker died running them)
         self._client = None
         self._started: list[str] = []  # keys of this pool's jobs whose stop signal is set up
+        self._scenes: dict[str, Any] = {}  # scene id -> the scene scattered to the cluster
         if scheduler:
             self.client()  # an unreachable address is said now, not after the scenes are computed
 
@@ -147,8 +152,21 @@ class Pool:
             self._started.append(job.key)
         # Locally a job that times itself on every core takes every slot: it runs alone.
         resources = {"cores": self.jobs if uses_all_cores(job) else 1} if self.local else None
-        return self.client().submit(execute, job, self.run_id, key=f"job-{uuid.uuid4().hex}", pure=False,
-                                    priority=priority, resources=resources)
+        scene = self._scattered(job.scene)
+        return self.client().submit(execute, dataclasses.replace(job, scene=None) if scene is not None else job,
+                                    self.run_id, scene, key=f"job-{uuid.uuid4().hex}", pure=False, priority=priority,
+                                    resources=resources)
+
+    def _scattered(self, scene):
+        """The scene sent to the cluster once, as a future every job of it takes (a recorded
+        scene's frames are megabytes: in each job they were sent again, and Dask warned of a
+        large graph each time); None for no scene."""
+        if scene is None:
+            return None
+        key = scene_id(scene)
+        if key not in self._scenes:
+            self._scenes[key] = self.client().scatter(scene, broadcast=not self.local, hash=False)
+        return self._scenes[key]
 
     def ran(self, job: Job, outcome: Outcome) -> None:
         """Note where a finished job ran."""
@@ -196,6 +214,7 @@ class Pool:
                 "workers": dict(self.workers), "retried": list(self.retried)}
 
     def close(self) -> None:
+        self._scenes.clear()
         if self._client is not None and not self.local:
             self._client.close()
         self._client = None

@@ -144,8 +144,12 @@ class Runner:
                     raise ValueError(f"job {job.backend} has no scene to run on")
             for c in range(len(chains)):
                 advance(c)
+            at_once = self.pool.at_once() if completed is not None else 1
             for future in completed or ():
-                bar.set_postfix_str(f"{len(running) - 1} running, {failed} failed", refresh=False)
+                # Submitted jobs wait in the cluster's queue: at most `at_once` of them run.
+                left = len(running) - 1
+                bar.set_postfix_str(f"{min(left, at_once)} running, {max(left - at_once, 0)} queued, {failed} failed",
+                                    refresh=False)
                 c, job = running.pop(future)
                 outcome = self._collect(job, future)
                 record(c, job, outcome)

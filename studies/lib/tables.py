@@ -55,19 +55,25 @@ def _engine_ms(value: float) -> str:
     return f"{'-':>10}" if pd.isna(value) else f"{value:10.3f}" if value < 100 else f"{value:10.1f}"
 
 
+def _seconds(value) -> str:
+    """Compilation: `-` where nothing was compiled apart (an engine, or rows from before it was)."""
+    return f"{'-':>9}" if value is None or pd.isna(value) or value == 0 else f"{value:9.2f}"
+
+
 def format_table(table: pd.DataFrame, baseline: str | None, planned: int | None = None) -> str:
     """A fixed-width text table sorted by total time per frame; a backend stopped before all of
     its `planned` frames (over its budget, say) is marked with how many it ran."""
     width = max([len("backend"), *map(len, table.index)])
     head = (f"{'backend':<{width}} {'reports':<8} {'update ms':>17} {'pairs ms':>17} {'narrow ms':>17} "
-            f"{'total ms':>17} {'engine bp':>10} {'cand/true':>9} {'missed':>6} {'setup s':>7}")
+            f"{'total ms':>17} {'engine bp':>10} {'cand/true':>9} {'missed':>6} {'setup s':>7} {'compile s':>9}")
     if baseline:
         head += f" {'x ' + baseline:>16}"
     lines = [head, "-" * len(head)]
     for name, r in table.assign(missed_all=missed_total(table)).iterrows():
         missed = int(r["missed_all"])
         line = (f"{name:<{width}} {r['reports']:<8} " + " ".join(_ms(r[f"{s}_ms"], r[f"{s}_iqr_ms"]) for s in STAGES)
-                + f" {_engine_ms(r['engine_broadphase_ms'])} {r['cand_per_true']:9.2f} {missed:6d} {r['setup_s']:7.2f}")
+                + f" {_engine_ms(r['engine_broadphase_ms'])} {r['cand_per_true']:9.2f} {missed:6d} {r['setup_s']:7.2f}"
+                + f" {_seconds(r.get('compile_s'))}")
         if baseline:
             line += f" {r['speedup']:15.1f}x"
         if r.get("partial") or (planned and r["frames"] < planned):

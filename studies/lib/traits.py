@@ -14,7 +14,8 @@ from scenes.motion import Trajectory
 
 # Thresholds of the plain-word descriptions.
 LARGE_N = 50_000
-WIDE_SPREAD = 10.0  # largest over smallest radius
+MIXED_SPREAD = 2.0  # largest over smallest radius: under it, similar sizes
+WIDE_SPREAD = 8.0  # from it, a wide spread (a grid sized by the largest wastes cells on the smallest)
 CLUMPED = 3.0  # index of dispersion of cell counts (1 for uniformly random placement)
 CONCENTRATED = 0.6  # spread along an axis over that of a uniform placement on the same extent
 FAST = 0.5  # displacement per frame in median radii
@@ -24,13 +25,13 @@ RESTING_CONTACT = 0.5  # share of the movers at rest that makes it a scene of re
 
 @dataclass
 class Traits:
-    n: int
+    n: int  # objects alive together (in the fullest frame of a recording)
     radius_spread: float  # largest / smallest positive radius
     dispersion: float  # variance / mean of the objects per cell of a ~4-per-cell grid
     concentration_x: float  # std of x over std of a uniform placement on the x extent
     concentration_y: float
     step_in_radii: float  # median displacement per frame / median radius
-    coverage: float  # summed box area over the scene box's area (scenes.coverage, as compare says it)
+    coverage: float  # summed box area over the scene box's area; recorded: of those alive, over the box they occupy
     # The traits of recorded scenes (0 for the essay's motion): objects that never move, objects
     # that appear or go, movers at rest, and movers over a radius per frame.
     static_share: float = 0.0
@@ -39,6 +40,7 @@ class Traits:
     fast_share: float = 0.0  # of the moving objects, those over one radius per frame
     concentration_z: float = 1.0  # spheres: as x and y (circles: 1)
     dim: int = 2
+    recorded: bool = False  # positions and coverage of the objects alive in its fullest frame
 
     def recorded_words(self) -> list[str]:
         """The traits of a recorded scene that decide between broad phases, in plain words."""
@@ -59,6 +61,8 @@ class Traits:
         out = [f"n = {self.n:,}" + (" (large)" if self.n >= LARGE_N else "") + (" spheres" if self.dim == 3 else "")]
         if self.radius_spread >= WIDE_SPREAD:
             out.append(f"radii spread {self.radius_spread:.0f}:1")
+        elif self.radius_spread >= MIXED_SPREAD:
+            out.append(f"mixed sizes (radii spread {self.radius_spread:.1f}:1)")
         else:
             out.append("similar sizes" + (f" (radii spread {self.radius_spread:.1f}:1)" if self.radius_spread > 1.01 else ""))
         along = [a for a, c in (("x", self.concentration_x), ("y", self.concentration_y), ("z", self.concentration_z))
@@ -73,13 +77,51 @@ class Traits:
             out.append(f"fast motion ({self.step_in_radii:.2g} radii per frame)")
         else:
             out.append(f"coherent motion ({self.step_in_radii:.2g} radii per frame)")
-        out.append(f"the objects' boxes cover {self.coverage:.0%} of the scene's box"
-                   + (" (by volume)" if self.dim == 3 else ""))
+        out.append(covering_words(self.coverage, self.recorded, self.dim))
         return out + self.recorded_words()
 
 
+def fullest_frame(traj: Trajectory) -> int:
+    """The first frame with the most objects alive (frame 0 without spawning)."""
+    return int(traj.alive.sum(axis=1).argmax()) if traj.alive is not None and traj.frames else 0
+
+
+def _coverage(traj: Trajectory) -> tuple[float, bool]:
+    """(coverage, whether over the occupied box): a generated scene's objects over its box; a
+    recorded scene's objects alive in its fullest frame over the box they occupy there (its
+    file's box spans every frame, and its slots include objects not yet spawned or gone)."""
+    if traj.scene.motion is None:
+        return coverage(traj.scene.radii, traj.scene.box), False
+    f = fullest_frame(traj)
+    here = traj.alive_at(f)
+    here = np.ones(traj.scene.n, dtype=bool) if here is None else here
+    pos, radii = traj.positions[f][here], traj.scene.radii[here]
+    if not len(radii):
+        return 0.0, True
+    box = tuple((pos - radii[:, None]).min(axis=0)) + tuple((pos + radii[:, None]).max(axis=0))
+    return coverage(radii, box), True
+
+
+def covering_words(share: float, occupied: bool, dim: int) -> str:
+    volume = " (by volume)" if dim == 3 else ""
+    if occupied:
+        return f"the objects alive cover {share:.0%} of the box they occupy{volume}"
+    return f"the objects' boxes cover {share:.0%} of the scene's box{volume}"
+
+
+def covering(traj: Trajectory) -> str:
+    """The scene's coverage in words, as compare and recommend print it."""
+    return covering_words(*_coverage(traj), traj.scene.dim)
+
+
 def measure_traits(traj: Trajectory) -> Traits:
-    pos, radii = traj.positions[0], traj.scene.radii
+    """The traits of the objects alive: where and how large in the fullest frame, how they move
+    over every frame."""
+    f = fullest_frame(traj)
+    here = traj.alive_at(f)
+    pos, radii = traj.positions[f], traj.scene.radii
+    if here is not None:
+        pos, radii = pos[here], radii[here]
     n, dim = pos.shape
     positive = radii[radii > 0]
     spread = float(positive.max() / positive.min()) if len(positive) else 1.0
@@ -93,20 +135,22 @@ def measure_traits(traj: Trajectory) -> Traits:
     counts = np.bincount(np.ravel_multi_index(cells.T, (side,) * dim), minlength=side**dim) if n else np.zeros(1)
     dispersion = float(counts.var() / counts.mean()) if n else 1.0
     conc = unit.std(axis=0) * np.sqrt(12) if n > 1 else np.ones(dim)  # std against a uniform placement's
+    # Motion over every frame, of every slot (ids), the alive ones counted.
+    slots, all_radii = traj.scene.n, traj.scene.radii
     steps = (np.abs(np.diff(0.5 * traj.positions, axis=0)).max(axis=2) * 2.0 if traj.frames > 1
-             else np.zeros((1, n)))
+             else np.zeros((1, slots)))
     # Only movers alive in both frames of a step count: a parked or static object is no motion.
-    alive = traj.alive if traj.alive is not None else np.ones((traj.frames, n), dtype=bool)
-    moving = alive[1:] & alive[:-1] if traj.frames > 1 else np.ones((1, n), dtype=bool)
+    alive = traj.alive if traj.alive is not None else np.ones((traj.frames, slots), dtype=bool)
+    moving = alive[1:] & alive[:-1] if traj.frames > 1 else np.ones((1, slots), dtype=bool)
     static = traj.scene.static
     if static is not None:
         moving = moving & ~static
     median_r = float(np.median(radii)) if n else 0.0
     step = float(np.median(steps[moving]) / median_r) if median_r > 0 and moving.any() else 0.0
-    in_radii = steps[moving] / np.maximum(np.broadcast_to(radii, steps.shape)[moving], 1e-300)
+    in_radii = steps[moving] / np.maximum(np.broadcast_to(all_radii, steps.shape)[moving], 1e-300)
     # Resting contact: slow and touching another object (the essay's objects are slow too, 0.02
     # radii a frame, but seldom touch); contacts of the first frame whose pairs were computed.
-    touching = np.zeros(n, dtype=bool)
+    touching = np.zeros(slots, dtype=bool)
     first = next((c for c in traj.contacts if c is not None), None)
     if first is not None and len(first):
         touching[np.asarray(first).ravel()] = True
@@ -119,6 +163,6 @@ def measure_traits(traj: Trajectory) -> Traits:
     fast = float((in_radii > 1.0).mean()) if recorded else 0.0
     spawns = float(np.abs(np.diff(alive.astype(np.int8), axis=0)).sum() / ((traj.frames - 1) * n)) \
         if traj.alive is not None and traj.frames > 1 and n else 0.0
-    covered = coverage(radii, traj.scene.box)
+    covered, occupied = _coverage(traj)
     return Traits(n, spread, dispersion, float(conc[0]), float(conc[1]), step, covered,
-                  traj.scene.static_share, spawns, resting, fast, float(conc[2]) if dim == 3 else 1.0, dim)
+                  traj.scene.static_share, spawns, resting, fast, float(conc[2]) if dim == 3 else 1.0, dim, occupied)

@@ -20,6 +20,7 @@ import pandas as pd
 import engines
 from scenes import Scene
 
+from . import compiling
 from .harness import Job, Outcome
 from .results import missed_total, summarise
 from .runner import Runner
@@ -91,17 +92,12 @@ def run_trial(runner: Runner, scene: Scene, backend: str, params: dict[str, Any]
     return Trial.of(job, runner.run(job))
 
 
-def warm_up(backend: str) -> None:
-    """Compile our numba backends once in this process, so forked trials inherit the machine code
-    instead of each loading it from the cache. Engines are not touched here: one that crashes
-    must crash in a child, not in the study. Nor are our parallel kernels: running one here
-    starts numba's thread pool (TBB) in this process, and the children are forked from a worker
-    thread, where TBB's state is undefined in the child; each child loads them from the cache."""
-    if not engines.ours_on_one_thread(backend):
-        return
-    rng = np.random.default_rng(0)
-    b = engines.create(backend)
-    b.reset(rng.uniform(0, 100, (64, 2)), rng.uniform(1, 5, 64))
-    b.update(rng.uniform(0, 100, (64, 2)))
-    b.pairs()
-    b.close()
+def warm_up(backend: str, dim: int) -> None:
+    """Compile our numba backends once in this process (compiling.warm_up: scenes that take their
+    structured path), so forked trials inherit the machine code instead of each loading it from
+    the cache. Engines are not touched here: one that crashes must crash in a child, not in the
+    study. Nor are our parallel kernels: running one here starts numba's thread pool (TBB) in this
+    process, and the children are forked from a worker thread, where TBB's state is undefined in
+    the child; each child compiles or loads them before its clock starts."""
+    if engines.ours_on_one_thread(backend):
+        compiling.warm_up(backend, {}, dim)

@@ -1,0 +1,113 @@
+"""Compilation apart from building: our numba backends compile (or load from numba's cache) their
+kernels before a job's clock starts, and any compilation left for the timed run is counted apart.
+
+Without it a backend's first build in a fresh cache paid its compilation (own.grid_incremental's:
+19.7 s on a loaded machine, 0.06 s once cached) and a study skipped it as too slow to build. The
+warm-up runs the backend on small scenes that take its structured path: a sample of the job's own
+first frames (its radii, statics and spawning) and uniform moving scenes with equal and with
+mixed radii, each for a few frames, so that its build, update and pair kernels all compile.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+from numba.core import event
+
+import engines
+
+WARM_N = 2048  # objects: past every small-scene path of ours (own/small.py), a few ms a frame once compiled
+WARM_FRAMES = 4
+
+
+class CompileClock(event.Listener):
+    """Seconds numba spent compiling while installed (outermost compilations only: a kernel
+    compiles the kernels it calls inside its own)."""
+
+    def __init__(self) -> None:
+        self.seconds = 0.0
+        self._depth = 0
+        self._since = 0.0
+
+    def on_start(self, ev) -> None:
+        if self._depth == 0:
+            self._since = time.perf_counter()
+        self._depth += 1
+
+    def on_end(self, ev) -> None:
+        self._depth -= 1
+        if self._depth == 0:
+            self.seconds += time.perf_counter() - self._since
+
+    def __enter__(self) -> "CompileClock":
+        event.register("numba:compile", self)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        event.unregister("numba:compile", self)
+
+
+def compiles(backend: str) -> bool:
+    """Whether the backend is ours and compiled (numba): engines and the essay's Python are not."""
+    return engines.family(backend).kind == "own"
+
+
+def _frames(positions: np.ndarray, radii: np.ndarray, static, alive, rng) -> list[tuple]:
+    """(positions, alive) of WARM_FRAMES frames moving from `positions`, the statics still."""
+    velocities = rng.normal(0.0, 0.05, positions.shape) * max(float(radii.mean()) if len(radii) else 1.0, 1e-9)
+    if static is not None:
+        velocities[static] = 0.0
+    frames = []
+    for f in range(WARM_FRAMES):
+        flipped = None
+        if alive is not None:  # some objects come or go every frame (statics stay)
+            toggle = np.zeros(len(alive), dtype=bool)
+            toggle[f::WARM_FRAMES] = True
+            flipped = alive ^ (toggle if static is None else toggle & ~static)
+        frames.append((positions + (f + 1) * velocities, flipped))
+    return frames
+
+
+def warm_scenes(dim: int, sample: tuple | None) -> list[tuple]:
+    """(positions, radii, static, alive) of the warm-up scenes: the job's sample first, then
+    uniform scenes at the essay's coverage with equal and with mixed radii."""
+    rng = np.random.default_rng(0)
+    scenes = [sample] if sample is not None else []
+    side = 2000.0 * np.sqrt(WARM_N / 2048) if dim == 2 else 400.0 * (WARM_N / 2048) ** (1 / 3)
+    positions = rng.uniform(0.0, side, (WARM_N, dim))
+    for radii in (np.full(WARM_N, 10.0 if dim == 2 else 5.0), rng.uniform(2.0, 20.0 if dim == 2 else 8.0, WARM_N)):
+        scenes.append((positions, radii, None, None))
+    return scenes
+
+
+def sample_of(positions: np.ndarray, radii: np.ndarray, static, alive) -> tuple:
+    """At most WARM_N of the job's objects, evenly spaced in id, with their masks."""
+    pick = np.linspace(0, len(radii) - 1, min(len(radii), WARM_N)).astype(np.int64) if len(radii) else slice(0, 0)
+    return (np.ascontiguousarray(positions[pick]), radii[pick], None if static is None else static[pick],
+            None if alive is None else alive[pick])
+
+
+def warm_up(backend: str, params: dict[str, Any], dim: int, sample: tuple | None = None) -> float:
+    """Compile (or load) `backend(**params)`'s kernels for `dim` on the warm-up scenes; returns
+    the seconds it took (0 for a backend that compiles nothing). Any error is left for the timed
+    run to meet and report: the warm-up only prepares it."""
+    if not compiles(backend):
+        return 0.0
+    start = time.perf_counter()
+    rng = np.random.default_rng(1)
+    for positions, radii, static, alive in warm_scenes(dim, sample):
+        try:
+            b = engines.create(backend, **params)
+            try:
+                b.reset(positions, radii, static=static, alive=alive)
+                b.pairs()
+                for moved, now_alive in _frames(positions, radii, static, alive, rng):
+                    b.update(moved, now_alive)
+                    b.pairs()
+            finally:
+                b.close()
+        except Exception:  # noqa: BLE001 - the timed run reports it, with its own context
+            pass
+    return time.perf_counter() - start
