@@ -240,7 +240,7 @@ def harness_figures(backend: str, traj: Trajectory, budget_s: float, timeout_s: 
     the run's status."""
     result = run_isolated(Job(backend, budget_s=budget_s, timeout_s=timeout_s), traj)
     rows = result.rows if result.status == "ok" else []
-    missed = sum(int(r["missed"] or 0) for r in rows)
+    missed = sum(int(r["missed"] or 0) for r in rows) if rows else None  # None: not run, nothing to miss
     engine = [r["t_engine_broadphase_s"] for r in rows if r["t_engine_broadphase_s"] is not None]
     return {"status": result.status, "missed": missed,
             "total_ms": float(np.median([r["t_total_s"] for r in rows]) * 1e3) if rows else float("nan"),
@@ -274,7 +274,8 @@ def print_rivals(trajectories, table: "Table", chosen: list[str]) -> None:
             measured[backend] = figures
             table.add({"n": n, "dim": dim, "backend": backend, "kind": kind, **figures})
             print(f"{n:>9} {backend:<20} {kind:<9} {figures['total_ms']:>10.3f} {figures['broad_ms']:>16.3f} "
-                  f"{figures['engine_ms']:>16.3f} {figures['missed']:>7}  {figures['status']}", flush=True)
+                  f"{figures['engine_ms']:>16.3f} {'-' if figures['missed'] is None else figures['missed']:>7}  "
+                  f"{figures['status']}", flush=True)
         rivals = [r for r in rivals if measured[r]["status"] == "ok"]  # the next n: those that finished this one
         verdicts += rival_verdicts(n, measured)
     print("\nOurs against the rivals over spheres (one thread each; the harness's figures):")

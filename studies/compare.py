@@ -55,7 +55,7 @@ def list_backends(dim: int = 2) -> int:
             print(f"{name:20} UNAVAILABLE  {missing[name]}")
             continue
         cls = engines.backend_class(name)
-        doc = (cls.__doc__ or "").strip().split("\n")[0]
+        doc = engines.description(name)
         status = "available" if dim in cls.dims else "2D ONLY"
         dims = "+".join(f"{d}D" for d in cls.dims)
         print(f"{name:20} {status:<12} {dims:<6} reports {cls.reports:<8} {doc}")

@@ -271,7 +271,8 @@ def markdown(lines: list[str], entries: list[Entry], groups: list[list[Entry]], 
         t = e.trial
         timing = f"{t.median_ms:.3g}" if t.ok else t.status
         spread = f"{t.low_ms:.3g}..{t.high_ms:.3g}" if t.ok else ""
-        out.append(f"| {where} | {e.backend} | {params_text(e)} | {timing} | {spread} | {t.missed} | {e.note} |")
+        missed = t.missed if t.frames else "-"  # a trial that ran no frame missed nothing: it was not measured
+        out.append(f"| {where} | {e.backend} | {params_text(e)} | {timing} | {spread} | {missed} | {e.note} |")
     return "\n".join(out + ["", *notes]) + "\n"
 
 

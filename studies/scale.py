@@ -63,16 +63,21 @@ print(ready - start, time.perf_counter() - ready)
 """
 
 
-def compile_times() -> dict[str, float | str]:
-    """Seconds to JIT-compile our kernels into an empty cache ("cold_s"), then to load them from
-    it ("warm_s"), each after numba's own start-up ("numba_cold_s", "numba_warm_s"); with
-    "error", the last line of what a failed probe printed."""
+# A quick run leaves out the cold compile, which compiles every kernel of ours into an empty
+# cache (40 s of its two minutes on 2 cores).
+QUICK_COMPILE = {"skipped": "not measured in a quick run (it compiles every kernel into an empty cache)"}
+
+
+def compile_times(ours: list[str] | None = None) -> dict[str, float | str]:
+    """Seconds to JIT-compile our kernels (of `ours`, default every backend of ours) into an empty
+    cache ("cold_s"), then to load them from it ("warm_s"), each after numba's own start-up
+    ("numba_cold_s", "numba_warm_s"); with "error", the last line of what a failed probe printed."""
     with tempfile.TemporaryDirectory() as cache:
         probe = Path(cache) / "compile_probe.py"  # a file, so that its kernel can be cached too
         probe.write_text(COMPILE_PROBE)
         env = {**os.environ, "NUMBA_CACHE_DIR": cache}
         times: dict[str, float | str] = {}
-        ours = [n for n in engines.names() if engines.of_kind(n, "own")]
+        ours = ours or [n for n in engines.names() if engines.of_kind(n, "own")]
         for kind in ("cold", "warm"):
             done = subprocess.run([sys.executable, str(probe), *ours], env=env, capture_output=True, text=True,
                                   timeout=600)
@@ -303,6 +308,8 @@ def report(medians: pd.DataFrame, exponents: dict, stopped: dict, meta: dict, fo
     compile_s = meta["compile"]
     if "error" in compile_s:
         lines.append(f"Not measured: the probe failed ({compile_s['error']}).")
+    elif "skipped" in compile_s:
+        lines.append(compile_s["skipped"][0].upper() + compile_s["skipped"][1:] + ".")
     else:
         lines.append(f"numba compiles our kernels in {compile_s['cold_s']:.1f} s into an empty cache and loads them "
                      f"in {compile_s['warm_s']:.2f} s from it, after numba's own start-up of "
@@ -331,7 +338,7 @@ def parser() -> Parser:
     add_dim_option(p)
     add_trial_options(p, frames=3, repeat=1, budget=1.0, timeout=60.0)
     add_output_options(p, "scale", report_dir="docs/ for a full run, else the results folder")
-    add_quick_option(p, "n up to 2^11, one frame", max_log2_n=11, frames=1)
+    add_quick_option(p, "n up to 2^11, one frame, no cold compile measured", max_log2_n=11, frames=1)
     return p
 
 
@@ -383,7 +390,7 @@ def main(argv: list[str] | None = None) -> int:
         with Runner(writer, out, pool=Pool.from_args(args)) as runner:
             measure(args, [b for b in chosen if b not in missing], runner)
         writer.finish()
-        meta = out.meta(compile=compile_times())
+        meta = out.meta(compile=compile_times() if not args.quick else QUICK_COMPILE)
     # Only a run of every backend over every size replaces the report in docs/.
     full = args.backends == "*" and args.max_log2_n == 20 and not args.quick
     medians, stopped = summarise_sizes(read_rows(out.path)[0])
@@ -436,6 +443,8 @@ def finish(medians: pd.DataFrame, stopped: dict, meta: dict, out: Path, report_d
                   f"{r.ratio:>12.1f}x")
     if "error" in compile_s:
         print(f"\nnumba compile of our kernels: NOT MEASURED, the probe failed: {compile_s['error']}")
+    elif "skipped" in compile_s:
+        print(f"\nnumba compile of our kernels: {compile_s['skipped']}")
     else:
         print(f"\nnumba compile of our kernels: {compile_s['cold_s']:.1f} s with an empty cache, "
               f"{compile_s['warm_s']:.2f} s from the cache (our imports included), after numba's own "

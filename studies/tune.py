@@ -57,6 +57,9 @@ FAMILIES: dict[str, dict[str, Any]] = {
     **{f"{family} r=4..8": {"dist": family} for family in RECORDED_FAMILIES},
 }
 FAMILY_SIZES = (1024, 8192)
+# --families --quick: one scene of each kind (equal radii, mixed radii, resting contact, statics)
+# at the smaller size, so that a smoke run ends within two minutes on 2 cores.
+QUICK_FAMILIES, QUICK_FAMILY_SIZES = ("uniform r=10", "mixed r=1..100", "pile r=4..8", "level r=4..8"), (1024,)
 # Our structured backends, each with the knobs that keep it exact (own.verlet's `every`,
 # `precision` and `fat` trade misses for speed: that is tradeoff's study, not a default rule's).
 OWN = ["own.grid", "own.grid_incremental", "own.sap", "own.sap_incremental", "own.quadtree", "own.bvh", "own.verlet"]
@@ -179,8 +182,9 @@ def best_rows(results: list[Tuned], n: int) -> list[dict[str, Any]]:
 def families_report(runner: Runner, out: Path, report_dir: Path, args) -> None:
     """Our defaults against the tuned optimum on every scene family; writes TUNING.md + figures."""
     rows, curves = [], []
-    for family, kwargs in FAMILIES.items():
-        for n in FAMILY_SIZES:
+    families = {f: FAMILIES[f] for f in QUICK_FAMILIES} if args.quick else FAMILIES
+    for family, kwargs in families.items():
+        for n in QUICK_FAMILY_SIZES if args.quick else FAMILY_SIZES:
             scene = generate(n=n, seed=args.seed, speed=args.speed, **kwargs)
             print(f"{family}, n={n}:", flush=True)
             for t in run_tune(runner, scene, OWN, args, exact_only=True):
@@ -310,7 +314,8 @@ def parser() -> Parser:
     p.add_argument("--families", action="store_true",
                    help="check our own backends' default rules over the scene families and write TUNING.md")
     add_trial_options(p, frames=10, repeat=3, budget=1.0, timeout=120.0)
-    add_quick_option(p, "3 frames, 1 repeat", frames=3, repeat=1)
+    add_quick_option(p, f"3 frames, 1 repeat; with --families, the families {', '.join(QUICK_FAMILIES)} at n = "
+                        f"{QUICK_FAMILY_SIZES[0]} only", frames=3, repeat=1)
     add_output_options(p, "tune", report_dir="docs/ for --families, OUT with --quick")
     return p
 

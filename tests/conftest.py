@@ -1,14 +1,33 @@
 """Shared test settings: hypothesis profiles (seeded, no deadline: the first call JIT-compiles),
-and a check after every test that it left the checkout as it was (every test writes under its
-own temporary folder: never results/ or docs/ of the repository)."""
+a check after every test that it left the checkout as it was (every test writes under its own
+temporary folder: never results/ or docs/ of the repository), and one temporary folder for the
+whole run, removed at its end, so that what engines and Dask leave in the temporary directory
+(PhysX's hub lock, Dask's scratch space) does not stay on the machine."""
 
 import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, settings
 
 ROOT = Path(__file__).resolve().parents[1]
+
+def pytest_configure(config):
+    # Before anything reads it: child processes inherit TMPDIR, and libraries read it when they start.
+    if "BROADPHASE_TEST_TMPDIR" not in os.environ:
+        folder = tempfile.mkdtemp(prefix="broadphase-tests-")
+        os.environ["TMPDIR"] = os.environ["BROADPHASE_TEST_TMPDIR"] = folder
+        tempfile.tempdir = None  # gettempdir() reads TMPDIR again
+        config._broadphase_tmpdir = folder
+
+
+def pytest_unconfigure(config):
+    folder = getattr(config, "_broadphase_tmpdir", None)
+    if folder:
+        shutil.rmtree(folder, ignore_errors=True)
+
 
 settings.register_profile(
     "default", deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]

@@ -649,3 +649,18 @@ def test_physx_contact_reads_grow_to_the_scene_and_stay_quiet(monkeypatch, capfd
         backend.close()
     out, err = capfd.readouterr()
     assert "Incomplete raw contact data" not in out + err
+
+
+@pytest.mark.parametrize("name", ["physx.sap"])
+def test_physx_leaves_no_scene_folder_behind(name, tmp_path, monkeypatch):
+    """The scene file PhysX reads at reset is removed by close(), however far reset got."""
+    monkeypatch.setattr("tempfile.tempdir", str(tmp_path))
+    backend = make(name)
+    backend.reset(np.array([[0.0, 0.0], [1.0, 0.0]]), np.array([1.0, 1.0]))
+    backend.pairs()
+    backend.close()
+    failed = make(name)
+    with pytest.raises(ValueError):
+        failed.reset(np.array([[0.0, 0.0], [1.0, 0.0]]), np.array([1.0, 0.0]))  # radius 0: refused
+    failed.close()
+    assert not list(tmp_path.glob("broadphase-physx-*"))

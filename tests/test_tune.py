@@ -151,9 +151,9 @@ def test_quick_tune_end_to_end_writes_rows_figures_and_best(tmp_path, capsys):
 
 
 def test_families_report_lists_every_family_and_backend(tmp_path, monkeypatch):
-    monkeypatch.setattr(tune, "FAMILIES", {"uniform r=10": {"dist": "uniform", "radius": 10.0},
-                                           "mixed r=1..100": {"dist": "uniform", "radii": (1.0, 100.0)}})
-    monkeypatch.setattr(tune, "FAMILY_SIZES", (128,))
+    # A quick run checks its few families at one size (the full run, every family at each size).
+    monkeypatch.setattr(tune, "QUICK_FAMILIES", ("uniform r=10", "mixed r=1..100"))
+    monkeypatch.setattr(tune, "QUICK_FAMILY_SIZES", (128,))
     assert tune.main(["--families", "--quick", "--out", str(tmp_path / "o"), "--report-dir", str(tmp_path / "r")]) == 0
     report = (tmp_path / "r" / "TUNING.md").read_text()
     for family in ("uniform r=10", "mixed r=1..100"):

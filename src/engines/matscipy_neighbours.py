@@ -14,6 +14,8 @@ from .cutoff import CutoffSearch, in_3d
 
 
 class MatscipyCells(CutoffSearch):
+    """matscipy's neighbour list, a cell list in C called once per frame, non-periodic, in float64."""
+
     name, method = "matscipy.cells", "grid"
     both_ways = True
 

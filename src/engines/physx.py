@@ -262,6 +262,9 @@ class _PhysX(BroadPhase):
 
     def close(self):
         """Release what reset() built, however far it got."""
+        folder, self._folder = getattr(self, "_folder", None), None
+        if folder is not None:  # the scene file is read at reset: gone whatever else was built
+            shutil.rmtree(folder, ignore_errors=True)
         physx, self._physx = getattr(self, "_physx", None), None
         if physx is None:
             return
@@ -275,7 +278,6 @@ class _PhysX(BroadPhase):
                 physx.wait_task(physx.detach_ovstage())
             stage.destroy()
         physx.destroy()
-        shutil.rmtree(self._folder, ignore_errors=True)
 
     def __del__(self):
         try:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import fnmatch
 import importlib
 import re
+import sys
 from dataclasses import dataclass
 from functools import cache
 from typing import Any, Literal
@@ -125,6 +126,15 @@ BACKENDS: dict[str, str] = {
     "sklearn.kdtree": "engines.sklearn_neighbors:SklearnKDTree",
     "sklearn.balltree": "engines.sklearn_neighbors:SklearnBallTree",
 }
+
+
+def description(name: str) -> str:
+    """The first sentence of the backend's class docstring (of its module's where it has none)."""
+    cls = backend_class(name)
+    text = cls.__doc__ or getattr(sys.modules.get(cls.__module__), "__doc__", None) or ""
+    paragraph = " ".join(text.strip().split("\n\n")[0].split())
+    sentence = re.match(r"(.+?[.!?])(?=\s+[A-Z`(]|$)", paragraph)
+    return sentence.group(1) if sentence else paragraph
 
 
 def names() -> list[str]:

@@ -14,6 +14,8 @@ from .cutoff import box_filtered
 
 
 class KDTree(BroadPhase):
+    """scipy's cKDTree, rebuilt every frame: `query_pairs` at twice the largest radius, then an exact box filter."""
+
     name = "scipy.kdtree"
     # Its distances overflow for centres about 1.8e308 apart: it raises "Encountering floating
     # point overflow" from inside query_pairs.

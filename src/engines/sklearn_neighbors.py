@@ -25,8 +25,12 @@ class _SklearnTree(CutoffSearch):
 
 
 class SklearnKDTree(_SklearnTree):
+    """scikit-learn's KDTree, fitted on the centres every frame, every pair within the cutoff."""
+
     name, method, algorithm = "sklearn.kdtree", "kdtree", "kd_tree"
 
 
 class SklearnBallTree(_SklearnTree):
+    """scikit-learn's BallTree, fitted on the centres every frame, every pair within the cutoff."""
+
     name, method, algorithm = "sklearn.balltree", "tree", "ball_tree"

@@ -28,6 +28,8 @@ def z_height(side: float, cutoff: float) -> float:
 
 
 class VesinCells(CutoffSearch):
+    """vesin's neighbour list, a cell list in C++ called once per frame (periodic, in a box with room to spare)."""
+
     name, method = "vesin.cells", "grid"
 
     def _reset(self, positions, radii):

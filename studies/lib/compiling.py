@@ -18,8 +18,8 @@ from numba.core import event
 
 import engines
 
-WARM_N = 2048  # objects: past every small-scene path of ours (own/small.py), a few ms a frame once compiled
-WARM_FRAMES = 4
+WARM_N = 256  # objects: past every small-scene path of ours (own/small.py: 64), well under a ms a frame
+WARM_FRAMES = 3
 
 
 class CompileClock(event.Listener):

@@ -37,7 +37,9 @@ def save(fig: Figure, path: Path, dpi: int = 110) -> Path:
             fig.set_layout_engine("constrained")
         else:
             fig.tight_layout()
-        fig.savefig(path, dpi=dpi)
+        # A tight box besides: where long labels outgrow what the layout can fit (a backend named
+        # with its time and "MISSED PAIRS"), the canvas grows instead of cutting them.
+        fig.savefig(path, dpi=dpi, bbox_inches="tight", pad_inches=0.1)
     return path
 
 

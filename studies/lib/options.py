@@ -27,6 +27,7 @@ written from them. A study that needs something else gets a new name (recommend'
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from scenes import DISTRIBUTIONS, ESSAY_COVERAGE, FAMILIES, SCENE_KINDS, Scene, generate
 from scenes.generate import cube
@@ -37,6 +38,7 @@ from scenes.io import load_scene
 from scenes.recorded import load_trajectory
 
 from .cli import CliError
+from .output import in_use_by
 from .pool import add_cluster_options, check_cluster_options
 
 TRIAL_OPTIONS = ("frames", "repeat", "budget", "timeout", "memory")
@@ -208,3 +210,7 @@ def check_output_options(args: argparse.Namespace) -> None:
         raise CliError(f"--{'resume' if args.resume else 'report-only'} needs --out, the folder of an earlier run")
     if args.resume and args.report_only:
         raise CliError("give --resume or --report-only, not both")
+    holder = in_use_by(Path(args.out)) if args.report_only else None
+    if holder:
+        raise CliError(f"{args.out} is in use by a live run ({holder}): its rows are still being written; report "
+                       "once it has finished")

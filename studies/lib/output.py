@@ -128,6 +128,21 @@ def write_json(path: Path, data: dict[str, Any]) -> None:
     os.replace(tmp, path)
 
 
+def in_use_by(folder: Path) -> str | None:
+    """The live run holding `folder`'s lock (its pid and command), or None. (The lock is taken and
+    let go at once where it is free.)"""
+    path = Path(folder) / ".lock"
+    if not path.is_file():
+        return None
+    with open(path, "r+") as lock:
+        try:
+            fcntl.lockf(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            return lock.read().strip() or "another process"
+        fcntl.lockf(lock, fcntl.LOCK_UN)
+    return None
+
+
 class Output:
     """The folder of one study run, locked while the run lasts.
 
