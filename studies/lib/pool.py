@@ -153,19 +153,25 @@ class Pool:
         # Locally a job that times itself on every core takes every slot: it runs alone.
         resources = {"cores": self.jobs if uses_all_cores(job) else 1} if self.local else None
         scene = self._scattered(job.scene)
-        return self.client().submit(execute, dataclasses.replace(job, scene=None) if scene is not None else job,
-                                    self.run_id, scene, key=f"job-{uuid.uuid4().hex}", pure=False, priority=priority,
-                                    resources=resources)
+        with warnings.catch_warnings():
+            # A remote job carries its scene (see _scattered): Dask's warning that the task is
+            # large is about that, and says nothing the user can act on.
+            warnings.filterwarnings("ignore", message="Sending large graph", category=UserWarning)
+            return self.client().submit(execute, dataclasses.replace(job, scene=None) if scene is not None else job,
+                                        self.run_id, scene, key=f"job-{uuid.uuid4().hex}", pure=False,
+                                        priority=priority, resources=resources)
 
     def _scattered(self, scene):
-        """The scene sent to the cluster once, as a future every job of it takes (a recorded
-        scene's frames are megabytes: in each job they were sent again, and Dask warned of a
-        large graph each time); None for no scene."""
-        if scene is None:
+        """On this machine, the scene handed to the cluster once, as a future every job of it
+        takes (a recorded scene's frames are megabytes: each job sent them again, and Dask warned
+        of a large graph each time); None for no scene, and on a remote cluster, where data
+        scattered to a worker dies with it and cannot be recomputed: a worker killed mid-job would
+        cost every job of the scene, not one retry."""
+        if scene is None or not self.local:
             return None
         key = scene_id(scene)
         if key not in self._scenes:
-            self._scenes[key] = self.client().scatter(scene, broadcast=not self.local, hash=False)
+            self._scenes[key] = self.client().scatter(scene, hash=False)
         return self._scenes[key]
 
     def ran(self, job: Job, outcome: Outcome) -> None:
