@@ -18,6 +18,7 @@ import pandas as pd
 
 import engines
 from scenes import FAMILIES
+from scenes.costs import size_problem
 from scenes.families3d import FAMILIES_3D
 from scenes.generate import at_essay_density
 
@@ -66,6 +67,10 @@ def parse(argv: list[str] | None):
         raise CliError(f"--sizes must be a comma-separated list of integers, got {args.sizes!r}") from None
     if min(args.size_list) < 2:
         raise CliError("--sizes: every n must be at least 2")
+    for n in args.size_list:  # before --out is touched: a finished run's rows stay as they are
+        problem = size_problem(n, args.frames + 1, dim=dim_of(args))
+        if problem:
+            raise CliError(f"--sizes: {problem}")
     return args
 
 

@@ -91,7 +91,6 @@ def touching_along_x(positions, radii):
 LIMITATIONS = {
     "bullet.dbvt": [zero_radius],
     "bullet.simple": [zero_radius],
-    "coal.tree": [zero_radius],
     "coal.interval": [zero_radius, exact_touching],
     "coal.hash": [zero_radius, exact_touching],
     "mujoco.sap": [exact_touching],
@@ -346,13 +345,6 @@ def test_mujoco_misses_an_exactly_touching_pair_among_others_it_finds_alone():
 
 
 @pytest.mark.engine_limitation
-def test_coal_tree_rejects_zero_volume_boxes():
-    backend = make("coal.tree")
-    backend.reset([[0.0, 0.0], [0.0, 0.0]], [0.0, 0.0])
-    with pytest.raises(ValueError, match="negative volume"):
-        backend.update([[0.0, 0.0], [0.0, 0.0]])
-
-
 @pytest.mark.engine_limitation
 @pytest.mark.parametrize("name", ["bullet.dbvt", "bullet.simple"])
 def test_bullet_drops_objects_whose_box_is_too_large(name):
@@ -441,6 +433,31 @@ REFUSED = [  # (backend, positions, radii, the words of the refusal, what the en
     ("coal.sap", SPREAD * 1e16, np.ones(50), "coordinates up to 9.95e+15, beyond its limit of 1e+15", "SIGSEGV"),
     ("coal.tree", SPREAD * 1e16, np.ones(50), "coordinates up to 9.95e+15, beyond its limit of 1e+15",
      "ValueError"),  # "The bounding volume has a negative volume"
+    ("coal.tree", SPREAD * 100, np.r_[0.0, np.full(49, 3.0)], "radius 0 (object 0), which it cannot create",
+     "ValueError"),  # at update: "The bounding volume has a negative volume", several lines from inside
+    ("coal.sap", SPREAD * 100, np.r_[1e-300, np.full(49, 3.0)], "radius 1e-300 (object 0), too small to widen",
+     "SIGSEGV"),  # a box of zero width, as radius 0
+    ("chipmunk.bbtree", [[0.0, 0.0], [5.0, 5.0]], [1e308, 1.0], "object 0 reaches 1e+308 from the origin",
+     "[]"),  # its fat box overflows to infinity: the pair is lost
+    ("mujoco.sap", [[1.0, 1.0], [2.0, 2.0], [1e300, 1e300]], [1.0, 1.0, 1e300], "object 2 reaches 2e+300",
+     "FatalError"),  # "mju_makeFrame: xaxis of contact frame undefined"
+    ("vesin.cells", SPREAD * 100, np.r_[1e300, np.full(49, 3.0)], "its box would span",
+     "SIGFPE"),
+    ("matscipy.cells", SPREAD * 100, np.r_[1e300, np.full(49, 3.0)], "its box would span",
+     "[]"),  # every pair lost
+    ("freud.aabb", SPREAD * 100, np.r_[1e300, np.full(49, 3.0)], "its box would span",
+     "RuntimeError"),  # "The AABBQuery r_max is too large for this box."
+    # Objects at one point, every pair of them a contact: minutes where the limit is passed.
+    ("box2d.v2", np.zeros((1000, 2)), np.zeros(1000), "1000 objects at one point [0.0, 0.0], over its limit of 500",
+     "timeout"),
+    ("rapier.bvh", np.zeros((1000, 2)), np.zeros(1000), "1000 objects at one point [0.0, 0.0], over its limit of 500",
+     "timeout"),
+    ("chipmunk.bbtree", np.zeros((2000, 2)), np.zeros(2000), "2000 objects at one point [0.0, 0.0], over its limit",
+     "timeout"),
+    ("chipmunk.hash", np.zeros((2000, 2)), np.zeros(2000), "2000 objects at one point [0.0, 0.0], over its limit",
+     "timeout"),
+    ("matscipy.cells", [[0.0, 0.0], [0.0, 0.0]], [1e-300, 1e-300], "largest radius 1e-300: a cutoff of 2e-300 is under",
+     "RuntimeError"),  # "Zero cell volume."
     ("coal.tree_array", SPREAD * 100, np.full(50, 1e155), "radius 1e+155 (object 0), over its limit of 1e+150",
      "SIGSEGV"),
     ("coal.tree_array", generate("uniform", 1024, seed=0).positions, np.full(1024, 10.0),
@@ -498,6 +515,7 @@ UNGUARDED = textwrap.dedent("""
     cls = engines.backend_class(name)
     cls.limits = NO_LIMITS
     cls._check_cells = lambda self, positions: None  # the hashes' and cell lists' own guards
+    cls._check_held = lambda self, positions: None  # the neighbour lists' cutoff and box guard
     backend = cls()
     try:
         backend.reset(positions, radii)
@@ -530,7 +548,7 @@ def test_the_guards_are_needed_unguarded_the_engine_fails(name, positions, radii
         done = subprocess.run([sys.executable, "-c", UNGUARDED, name, str(tmp_path / "p.npy"), str(tmp_path / "r.npy")],
                               capture_output=True, text=True, timeout=UNGUARDED_SECONDS.get(name, 10), env=env,
                               preexec_fn=limit_memory if cap else None)
-        seen = {-11: "SIGSEGV", -6: "SIGABRT"}.get(done.returncode) or done.stdout.strip().splitlines()[-1]
+        seen = {-11: "SIGSEGV", -6: "SIGABRT", -8: "SIGFPE"}.get(done.returncode) or done.stdout.strip().splitlines()[-1]
     except subprocess.TimeoutExpired:
         seen = "timeout"
     assert seen in (unguarded if isinstance(unguarded, tuple) else (unguarded,))

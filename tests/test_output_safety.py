@@ -33,6 +33,7 @@ BAD_INPUTS = [
     ("scenes", ["--backends", "nosuch.*"]),
     ("show", ["--backends", "own.grid", "--scene", "{nan}"]),
     ("bench", ["--seconds", "-1"]),
+    ("scenes", ["--sizes", "1000000000000"]),
     ("stress", ["--max-n", "0"]),
     ("stress", ["--max-n", "-5"]),
     ("compare", ["--trajectory", "{empty}"]),

@@ -118,6 +118,50 @@ def test_resume_drops_a_torn_last_record_and_says_so(finished_run, tmp_path, cut
     assert set(rows.backend) == set(before.backend)
 
 
+def test_resume_drops_a_record_torn_in_the_middle_and_measures_its_run_again(finished_run, tmp_path):
+    out = tmp_path / "run"
+    shutil.copytree(finished_run, out)
+    lines = (out / "results.csv").read_text().splitlines(keepends=True)
+    middle = len(lines) // 2
+    lines[middle] = lines[middle][: lines[middle].index(",") + 1]  # torn, and the next record runs on
+    (out / "results.csv").unlink()
+    (out / "results.partial.csv").write_text("".join(lines))
+    again = run_compare("--n", "64", "--quick", "--backends", "own.grid,own.sap,own.brute", "--out", str(out),
+                        "--resume")
+    assert again.returncode == 0, again.stderr[-2000:]
+    assert "dropped 1 broken record(s) in the middle of the file" in again.stderr
+    rows = records(out / "results.csv")
+    assert len(rows) == len(pd.read_csv(finished_run / "results.csv"))
+    assert not rows.duplicated(["backend", "repeat", "frame"]).any()
+
+
+def test_an_empty_partial_file_resumes_and_an_empty_results_file_is_one_line(finished_run, tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    shutil.copy(finished_run / "meta.json", out / "meta.json")
+    (out / "results.partial.csv").write_bytes(b"")  # a full disk during the header's write
+    again = run_compare("--n", "64", "--quick", "--backends", "own.grid", "--out", str(out), "--resume")
+    assert again.returncode == 0, again.stderr[-2000:]
+    assert "results.partial.csv was empty" in again.stderr
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    (empty / "results.csv").write_bytes(b"")
+    shutil.copy(finished_run / "meta.json", empty / "meta.json")
+    report = run_compare("--report-only", "--out", str(empty))
+    assert report.returncode == 2 and len(report.stderr.strip().splitlines()) == 1, report.stderr
+    assert "is empty: nothing to report" in report.stderr
+
+
+def test_a_run_whose_workers_died_on_every_try_is_measured_again_on_resume():
+    from studies.lib.results import WORKER_DIED, finished
+
+    key = json.dumps({"backend": "own.grid", "frames": 2, "repeats": 1})
+    assert not finished(key, [{"status": f"{WORKER_DIED}, twice (KilledWorker)", "repeat": "", "frame": ""}])
+    assert finished(key, [{"status": "crashed: signal 11 (SIGSEGV)", "repeat": "", "frame": ""}])
+    assert not finished(key, [{"status": "ok", "repeat": "0", "frame": "2"}])  # a row of frame 1 is missing
+    assert finished(key, [{"status": "ok", "repeat": "0", "frame": "1"}, {"status": "ok", "repeat": "0", "frame": "2"}])
+
+
 def test_complete_length_finds_the_last_record_outside_quotes():
     data = b'a,b\n1,"x\ny"\n2,"p,q'
     assert complete_length(data) == len(b'a,b\n1,"x\ny"\n')

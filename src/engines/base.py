@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Literal
 import numpy as np
 import numpy.typing as npt
 
-from scenes.scene import check_mask, check_positions, check_radii, shown
+from scenes.scene import check_mask, check_positions, check_radii, first_moved, shown
 
 if TYPE_CHECKING:
     from .knobs import Knob
@@ -33,6 +33,7 @@ PairArray = npt.NDArray[np.int64]
 
 EMPTY_PAIRS: PairArray = np.empty((0, 2), dtype=np.int64)
 NO_IDS = np.empty(0, dtype=np.int64)
+NO_ALIVE = np.empty(0, dtype=bool)  # first_moved's "every object alive"
 
 # "boxes": a superset of the pairs whose axis-aligned boxes overlap ("exact" if equal to it);
 # "contacts": the engine ran its own narrow phase first, so only a superset of the truly
@@ -50,7 +51,12 @@ class Limits:
 
     coordinate: float = math.inf  # largest |x| or |y| of a centre
     radius: float = math.inf  # largest radius
-    zero_radius: bool = True  # whether radius 0 is admitted
+    reach: float = math.inf  # largest |coordinate| + radius: how far from the origin a box goes
+    # Most objects at one identical centre, checked at reset: every pair of them is a contact
+    # (k^2 / 2), which engines that make a contact object per pair take minutes to create.
+    coincident: int | None = None
+    zero_radius: bool = True  # whether radius 0 is admitted, and boxes of zero width (a radius under half
+    # a unit in the last place of its coordinates: 1e-16 at x = 50)
     min_radius: float = 0.0  # smallest positive radius
     objects: int | None = None  # most objects
     why: str = ""
@@ -67,6 +73,12 @@ class Limits:
         if radii is not None and len(radii):
             if not self.zero_radius and radii.min() == 0.0:
                 return f"radius 0 (object {int(radii.argmin())}), which it cannot create"
+            if not self.zero_radius:
+                flat = ((positions + radii[:, None]) == (positions - radii[:, None])).any(axis=1)
+                if flat.any():
+                    k = int(np.flatnonzero(flat)[0])
+                    return (f"radius {radii[k]:.3g} (object {k}), too small to widen its box at coordinates "
+                            f"{positions[k].tolist()}: a box of zero width, which it cannot create")
             positive = np.where(radii > 0, radii, np.inf)
             if self.min_radius > 0 and positive.min() < self.min_radius:
                 return (f"radius {beside(positive.min(), self.min_radius)} (object {int(positive.argmin())}), under "
@@ -74,7 +86,26 @@ class Limits:
             if radii.max() > self.radius:
                 return (f"radius {beside(radii.max(), self.radius)} (object {int(radii.argmax())}), over its limit of "
                         f"{self.radius:.3g}")
+            if self.reach < math.inf:
+                with np.errstate(over="ignore"):
+                    far = np.abs(positions).max(axis=1) + radii
+                if far.max() > self.reach:
+                    k = int(far.argmax())
+                    return (f"object {k} reaches {beside(far[k], self.reach)} from the origin (coordinate plus "
+                            f"radius), beyond its limit of {self.reach:.3g}")
         return None
+
+
+    def crowd_problem(self, positions: np.ndarray) -> str | None:
+        """More objects at one identical centre than `coincident`, or None (at reset: a sort)."""
+        if self.coincident is None or len(positions) <= self.coincident:
+            return None
+        centres, counts = np.unique(positions, axis=0, return_counts=True)
+        if counts.max() <= self.coincident:
+            return None
+        k = int(counts.argmax())
+        return (f"{counts[k]} objects at one point {centres[k].tolist()}, over its limit of {self.coincident} "
+                f"(their {counts[k] * (counts[k] - 1) // 2} pairs are all contacts)")
 
 
 def beside(value: float, limit: float) -> str:
@@ -168,6 +199,7 @@ class BroadPhase(ABC):
         self.alive: np.ndarray | None = None
         self.spawned = self.removed = NO_IDS  # this frame's, for "native" backends
         self._alive_ids: np.ndarray | None = None  # "rebuild": the ids of the objects handed to the backend
+        self._static_home: tuple[np.ndarray, np.ndarray] | None = None  # static ids and where they were at reset
 
     def reset(self, positions: npt.ArrayLike, radii: npt.ArrayLike, static: npt.ArrayLike | None = None,
               alive: npt.ArrayLike | None = None) -> None:
@@ -178,8 +210,10 @@ class BroadPhase(ABC):
         n = pos.shape[0]
         radii = check_radii(radii, n)
         self.static, self.alive = check_mask(static, (n,), "static"), check_mask(alive, (n,), "alive")
-        self._check_limits(pos, radii)
+        self._check_limits(pos, radii, reset=True)
         self.objects, self.spawned, self.removed, self._all_radii = n, NO_IDS, NO_IDS, radii
+        ids = np.flatnonzero(self.static) if self.static is not None else NO_IDS
+        self._static_home = (ids, pos[ids].copy()) if len(ids) else None
         self._built = False
         if self._native_lifecycle() or (self.static is None and self.alive is None):
             self._alive_ids = None
@@ -195,10 +229,13 @@ class BroadPhase(ABC):
         if not self._built:
             raise RuntimeError(f"{self.name}: call reset(positions, radii) before update()")
         pos = check_positions(positions, self.objects, dims=(self.dim,))
-        self._check_limits(pos)
+        self._check_limits(pos, self._all_radii)  # a box may lose its width where it moved
         changed = False
         if alive is not None:
             alive = check_mask(alive, (self.objects,), "alive")
+        if self._static_home is not None:
+            self._check_statics(pos, alive if alive is not None else self.alive)
+        if alive is not None:
             before = self.alive if self.alive is not None else np.ones(self.objects, dtype=bool)
             changed = not np.array_equal(alive, before)
             if changed:
@@ -213,6 +250,16 @@ class BroadPhase(ABC):
             self._update(self._held_positions)
         if changed:
             self.spawned = self.removed = NO_IDS
+
+    def _check_statics(self, positions: np.ndarray, alive: np.ndarray | None) -> None:
+        """A static object alive now must be where it was at reset: every backend builds its
+        statics once (a static that moved was silently missed by most of them)."""
+        ids, kept = self._static_home
+        a = first_moved(positions, ids, kept, alive if alive is not None else NO_ALIVE)
+        if a >= 0:
+            raise ValueError(f"{self.name}: object {int(ids[a])} is static but moved, from {kept[a].tolist()} to "
+                             f"{positions[ids[a]].tolist()}: statics never move; mark it static=False, or reset "
+                             "with its new position")
 
     def _native_lifecycle(self) -> bool:
         """Whether statics and spawning reach it through its own means in the dimension it works
@@ -239,10 +286,12 @@ class BroadPhase(ABC):
         self._held_positions = np.ascontiguousarray(positions[self._alive_ids])
         self._reset(self._held_positions, self.radii)
 
-    def _check_limits(self, positions: np.ndarray, radii: np.ndarray | None = None) -> None:
+    def _check_limits(self, positions: np.ndarray, radii: np.ndarray | None = None, reset: bool = False) -> None:
         if self.limits is NO_LIMITS:  # our own backends: no cost per frame
             return
         problem = self.limits.problem(positions, radii)
+        if not problem and reset:  # the objects alive now
+            problem = self.limits.crowd_problem(positions if self.alive is None else positions[self.alive])
         if problem:
             raise ValueError(f"{self.name}: {problem}" + (f" ({self.limits.why})" if self.limits.why else ""))
 

@@ -33,7 +33,7 @@ import pymunk._chipmunk
 from numba import types
 
 from .base import BroadPhase
-from .chipmunk import HASH_SWEEPS, HashCellGuard
+from .chipmunk import HASH_SWEEPS, ChipmunkTree, HashCellGuard
 
 CDEF = """
 typedef double cpFloat;
@@ -214,6 +214,7 @@ class ChipmunkTreeIndex(_ChipmunkIndex):
 
     name = "chipmunk.bbtree_index"
     method = "tree"
+    limits = ChipmunkTree.limits  # the same fat boxes (chipmunk.py)
 
     def _new_index(self, positions, radii, static_index):
         index = lib.cpBBTreeNew(BOX_OF, static_index)

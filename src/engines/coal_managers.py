@@ -99,9 +99,11 @@ class CoalTree(_Coal):
     """Dynamic AABB tree (FCL's default manager)."""
 
     name, manager, method = "coal.tree", "DynamicAABBTreeCollisionManager", "tree"
-    # From coordinates of 1e16 on it raises "The bounding volume has a negative volume".
-    limits = Limits(coordinate=1e15, why="coal's tree computes negative volumes once coordinates reach 1e16")
-    breaks = "coal's dynamic AABB tree rejects zero-volume boxes ('The bounding volume has a negative volume')."
+    # From coordinates of 1e16 on it raises "The bounding volume has a negative volume", and so it
+    # does at update for a box of zero volume (a sphere of radius 0 among others).
+    limits = Limits(coordinate=1e15, zero_radius=False,
+                    why="coal's tree computes negative volumes once coordinates reach 1e16, and rejects boxes of "
+                        "zero volume")
 
 
 class CoalTreeArray(_Coal):

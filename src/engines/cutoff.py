@@ -26,6 +26,12 @@ from .base import EMPTY_PAIRS, BroadPhase, in_3d
 # strictly closer than the cutoff, and two circles of radius r_max that touch are exactly 2 r_max
 # apart (the reference counts them). The box filter takes the extra candidates out again.
 CUTOFF_PAD = 1.0 + 1e-6
+# What their cells and distances hold, by the precision they compute in: a box side whose cube
+# (a cell volume, a box volume) and squares stay finite, and a cutoff whose cube does not vanish.
+# Beyond them the libraries crashed (vesin: SIGFPE on one radius of 1e300), hung (freud's LinkCell),
+# raised from inside ("r_max is too large for this box", "Zero cell volume", "cutoff is too
+# small") or silently found nothing (matscipy, one radius of 1e300 among r = 3).
+HELD = {"float64": (1e-100, 1e100), "float32": (1e-12, 1e12)}  # (smallest cutoff, largest box side)
 
 
 def image_free_side(positions: np.ndarray, cutoff: float) -> tuple[float, np.ndarray]:
@@ -48,6 +54,7 @@ class CutoffSearch(BroadPhase):
     reports = "contacts"
     both_ways = False
     dims = (2, 3)
+    precision = "float64"  # what the library computes in (HELD)
 
     def _reset(self, positions, radii):
         self._cutoff = 2.0 * float(radii.max()) * CUTOFF_PAD if self.n else 0.0
@@ -56,7 +63,21 @@ class CutoffSearch(BroadPhase):
     def _update(self, positions):
         self._positions = positions
         if self.n > 1 and self._cutoff > 0:
+            self._check_held(positions)
             self._build(positions)
+
+    def _check_held(self, positions: np.ndarray) -> None:
+        """A one-line refusal of a cutoff or a box its cells and distances cannot hold (HELD)."""
+        smallest, largest = HELD[self.precision]
+        if self._cutoff < smallest:
+            raise ValueError(f"{self.name}: largest radius {self._cutoff / 2 / CUTOFF_PAD:.3g}: a cutoff of "
+                             f"{self._cutoff:.3g} is under the {smallest:.3g} its {self.precision} cells hold")
+        with np.errstate(over="ignore", invalid="ignore"):
+            side = float((positions.max(axis=0) - positions.min(axis=0)).max()) + 4.0 * self._cutoff
+        if not side <= largest:
+            raise ValueError(f"{self.name}: its box would span {side:.3g} (the centres' extent and four cutoffs of "
+                             f"{self._cutoff:.3g}), beyond the {largest:.3g} its {self.precision} cells and squared "
+                             "distances hold")
 
     def _pairs(self):
         if self.n < 2 or self._cutoff == 0:  # radius 0 everywhere: only coincident centres touch

@@ -33,6 +33,7 @@ MAX_LINKCELL_CELLS = 2**24
 class _FreudQuery(CutoffSearch):
     breaks = FLOAT32_BREAKS
     both_ways = True
+    precision = "float32"
 
     def _build(self, positions):
         self._check_cells(positions)

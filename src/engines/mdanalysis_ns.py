@@ -32,6 +32,7 @@ class MdaFastNS(CutoffSearch):
     name, method = "mdanalysis.nsgrid", "grid"
     breaks = FLOAT32_BREAKS
     limits = FLOAT32_LIMITS
+    precision = "float32"
 
     def _build(self, positions):
         lo = positions.min(axis=0)

@@ -57,8 +57,12 @@ class MujocoSap(BroadPhase):
     dims = (2, 3)
     breaks = ("MuJoCo's sweep and prune runs along the principal axis of all the geoms: spheres that touch exactly "
               "can be lost to rounding there (a pair found alone, missed among 30 others).")
-    limits = Limits(zero_radius=False, objects=MAX_BODIES,
-                    why="MuJoCo's spheres need a positive size, and it numbers bodies in 16 bits")
+    # Boxes reaching 1e300 from the origin (a sphere of radius 1e300 at (1e300, 1e300)) stopped it
+    # with "mju_makeFrame: xaxis of contact frame undefined" (its distances square and overflow),
+    # and a sphere of radius 1e308 lost its pairs; 1e150 keeps every square finite.
+    limits = Limits(zero_radius=False, objects=MAX_BODIES, reach=1e150,
+                    why="MuJoCo's spheres need a positive size, it numbers bodies in 16 bits, and its contact "
+                        "frames square distances, which overflow a double past 1e154")
 
     def _reset(self, positions, radii):
         self._positions, self._radii = positions, radii

@@ -68,6 +68,22 @@ def _sum(values: FloatArray) -> float:
     return total
 
 
+@nb.njit(cache=True)
+def first_moved(positions: FloatArray, ids: np.ndarray, kept: FloatArray, alive: np.ndarray) -> int:
+    """The first of `ids` alive now (`alive`, empty: all) whose position differs from `kept`
+    (its row in `kept`), or -1: the check that statics stay where they were, every frame (20 us
+    for 50,000 statics)."""
+    everyone = alive.shape[0] == 0
+    for a in range(ids.shape[0]):
+        i = ids[a]
+        if not everyone and not alive[i]:
+            continue
+        for d in range(positions.shape[1]):
+            if positions[i, d] != kept[a, d]:
+                return a
+    return -1
+
+
 def check_radii(radii: object, n: int) -> FloatArray:
     """Return `radii` as a contiguous (n,) float64 array of finite non-negative values, or raise ValueError."""
     arr = real_array(radii, "radii")

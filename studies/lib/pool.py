@@ -113,6 +113,7 @@ class Pool:
         self.run_id = uuid.uuid4().hex
         self.workers: dict[str, str] = {}  # host -> CPU model, of the workers that ran a job
         self.retried: list[str] = []  # jobs started more than once (a worker died running them)
+        self._killed: set[str] = set()  # jobs whose workers died on every try
         self._client = None
         self._started: list[str] = []  # keys of this pool's jobs whose stop signal is set up
         self._scenes: dict[str, Any] = {}  # scene id -> the scene scattered to the cluster
@@ -197,15 +198,21 @@ class Pool:
             _stops.pop(key, None)
         self._started.clear()
 
+    def killed(self, job: Job) -> None:
+        """A job whose every try ended with its worker's death (the scheduler gave up on it):
+        retried whatever the scheduler's log of its starts kept."""
+        self._killed.add(job.key)
+        self.retried = sorted(set(self.retried) | self._killed)
+
     def note_retries(self) -> None:
-        """Which of this run's jobs the scheduler started more than once."""
+        """Which of this run's jobs the scheduler started more than once (or gave up on)."""
         if self._client is None:
             return
         starts: dict[str, int] = {}
         for _, event in self._client.get_events(JOB_STARTED):
             if event.get("run") == self.run_id:
                 starts[event["job"]] = starts.get(event["job"], 0) + 1
-        self.retried = sorted(k for k, count in starts.items() if count > 1)
+        self.retried = sorted({k for k, count in starts.items() if count > 1} | self._killed)
 
     def at_once(self) -> int:
         """How many jobs run side by side."""

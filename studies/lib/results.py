@@ -38,6 +38,7 @@ COLUMNS = [
 # compilation: not measured apart, so inside the setup).
 ADDED_COLUMNS = {"dim": 2, "t_compile_s": None}
 STAGES = ["update", "pairs", "narrow", "total"]
+WORKER_DIED = "failed: the worker running it died"  # the status of a job no worker lived through
 PARTIAL, FINAL = "results.partial.csv", "results.csv"
 
 
@@ -158,7 +159,11 @@ def load_runs(source: Path, columns: list[str] = COLUMNS) -> tuple[Runs, set[str
     notes = []
     if cut < len(data):
         notes.append(f"dropped a torn last record ({len(data) - cut} bytes)")
-    header, *records = list(csv.reader(io.StringIO(data[:cut].decode("utf-8", errors="replace"), newline="")))
+    parsed = list(csv.reader(io.StringIO(data[:cut].decode("utf-8", errors="replace"), newline="")))
+    if not parsed:  # an empty file (a full disk during the header's write): nothing to keep
+        notes.append(f"{source.name} was empty")
+        return {}, set(), notes
+    header, *records = parsed
     # An earlier version's file may lack columns added since (they read as empty), never hold others.
     if not set(header) <= set(columns) or "job" not in header:
         raise CliError(f"{source} has other columns than this version writes; resume into a new --out")
@@ -166,10 +171,15 @@ def load_runs(source: Path, columns: list[str] = COLUMNS) -> tuple[Runs, set[str
         notes.append("dropped an incomplete last record")
         records.pop()
     by_job: dict[str, list[dict[str, str]]] = {}
+    torn = 0
     for record in records:
         if len(record) == len(header):
             row = dict(zip(header, record))
             by_job.setdefault(row["job"], []).append(row)
+        else:
+            torn += 1
+    if torn:  # records broken in the middle of the file: their runs are unfinished, measured again
+        notes.append(f"dropped {torn} broken record(s) in the middle of the file")
     unfinished = {k for k, rs in by_job.items() if not finished(k, rs)}
     if unfinished:
         notes.append(f"dropped the rows of {len(unfinished)} unfinished run(s); they are measured again")
@@ -213,10 +223,12 @@ def finished(key: str, rows: list[dict[str, Any]]) -> bool:
     """Whether a run's rows are all it will write: its last row is a failure, or the last frame of
     its last repeat (the key records both counts)."""
     last = rows[-1]
-    if last["status"] != "ok":
-        return True
+    if last["status"] != "ok":  # a failure is its outcome; not a worker's death, which --resume tries again
+        return not str(last["status"]).startswith(WORKER_DIED)
     planned = json.loads(key)
-    return _int(last["repeat"]) == planned["repeats"] - 1 and _int(last["frame"]) == planned["frames"]
+    # Every row is there too: a record broken in the middle of the file loses one of them.
+    return _int(last["repeat"]) == planned["repeats"] - 1 and _int(last["frame"]) == planned["frames"] \
+        and len(rows) == planned["repeats"] * planned["frames"]
 
 
 def _int(text: Any) -> int:
@@ -252,11 +264,19 @@ def read_rows(folder: Path) -> tuple[pd.DataFrame, bool]:
     folder = Path(folder)
     final, partial = folder / FINAL, folder / PARTIAL
     if final.exists():
-        return _checked(pd.read_csv(final), final), True
+        return _checked(_read_csv(final.read_bytes(), final), final), True
     if partial.exists():
         data = partial.read_bytes()
-        return _checked(pd.read_csv(io.BytesIO(data[:complete_length(data)])), partial), False
+        return _checked(_read_csv(data[:complete_length(data)], partial), partial), False
     raise CliError(f"{folder} holds no {FINAL} or {PARTIAL} to report on")
+
+
+def _read_csv(data: bytes, path: Path) -> pd.DataFrame:
+    """The rows of a results file's bytes; an empty file is one line (pandas raises EmptyDataError)."""
+    if not data.strip():
+        raise CliError(f"{path} is empty: nothing to report (rerun the study, or continue it with --resume --out "
+                       f"{path.parent})")
+    return pd.read_csv(io.BytesIO(data))
 
 
 def _checked(rows: pd.DataFrame, path: Path) -> pd.DataFrame:

@@ -29,7 +29,7 @@ from .cli import CliError
 from .harness import Job, Outcome, scene_columns
 from .output import Output
 from .pool import Pool
-from .results import RowWriter
+from .results import WORKER_DIED, RowWriter
 
 Each = Callable[[Job, Outcome], None]
 
@@ -185,8 +185,8 @@ class Runner:
         try:
             outcome = future.result()
         except KilledWorker as exc:
-            outcome = Outcome(job.backend, f"failed: the worker running it died, twice ({exc})".replace("\n", " "),
-                              [])
+            outcome = Outcome(job.backend, f"{WORKER_DIED}, twice ({exc})".replace("\n", " "), [])
+            self.pool.killed(job)
         except Exception as exc:
             raise CliError(f"a worker could not run {job.describe()}: {type(exc).__name__}: {exc}") from None
         self.pool.ran(job, outcome)

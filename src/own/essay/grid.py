@@ -17,7 +17,8 @@ def default_p(n: int, span: float, r_max: float) -> int:
     cells narrower than the largest diameter, below which the 9-cell scheme misses pairs."""
     p = max(1, round(math.sqrt(n) / 2))
     if r_max > 0:
-        p = min(p, max(1, int(span / (2 * r_max))))
+        cells = span / (2 * r_max)  # infinite for a subnormal radius: then the essay's p stands
+        p = min(p, max(1, int(cells))) if math.isfinite(cells) else p
     return p
 
 
