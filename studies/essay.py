@@ -16,6 +16,7 @@ from tqdm import tqdm
 
 import engines
 from scenes import Scene, generate
+from scenes.costs import size_problem
 
 from .lib.cli import CliError, Parser, command_line, run_cli, warn_unavailable
 from .lib.essay_plan import Plan, Run, fixed_runs, grid_search_run
@@ -113,7 +114,14 @@ def parser() -> Parser:
 
 
 def parse(argv: list[str] | None):
-    return parse_checked(parser(), argv)
+    args = parse_checked(parser(), argv)
+    plan = Plan.make(args.quick)
+    # Before --out is touched: a finished study's rows stay as they are.
+    largest = max(plan.sizes + [plan.fixed_n, plan.coherence_n])
+    problem = size_problem(largest, (args.frames or plan.frames) + 1)
+    if problem:
+        raise CliError(problem)
+    return args
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -48,6 +48,12 @@ def exact_touching(positions, radii):
     return bool(((lo[j] == hi[i]) | (lo[i] == hi[j])).any() or ((d**2).sum(axis=1) == reach**2).any())
 
 
+def huge_box(positions, radii):
+    """A box Bullet stops simulating: its extent's squared length reaches 1e12 (a sphere of radius
+    2.9e5 and up, its box a cube: 12 r^2), so its pairs are lost (engines/bullet.py's breaks)."""
+    return len(radii) > 0 and bool(12.0 * np.max(radii) ** 2 >= 1e12)
+
+
 FLOAT32 = np.finfo(np.float32)
 
 
@@ -89,8 +95,8 @@ def touching_along_x(positions, radii):
 
 # Engine -> inputs it mishandles (each shown by an evidence test below).
 LIMITATIONS = {
-    "bullet.dbvt": [zero_radius],
-    "bullet.simple": [zero_radius],
+    "bullet.dbvt": [zero_radius, huge_box],
+    "bullet.simple": [zero_radius, huge_box],
     "coal.interval": [zero_radius, exact_touching],
     "coal.hash": [zero_radius, exact_touching],
     "mujoco.sap": [exact_touching],
@@ -456,6 +462,13 @@ REFUSED = [  # (backend, positions, radii, the words of the refusal, what the en
      "timeout"),
     ("chipmunk.hash", np.zeros((2000, 2)), np.zeros(2000), "2000 objects at one point [0.0, 0.0], over its limit",
      "timeout"),
+    ("coal.naive", [[0.0, 0.0], [1e308, 0.0], [5.0, 5.0]], [1e308, 1e308, 1.0],
+     "radius 1e+308 (object 0), over its limit of 8e+307", "[[0, 2]]"),  # the radii sum to infinity: (0, 1) lost
+    ("freud.linkcell", SPREAD * 100, np.r_[1e300, np.full(49, 3.0)], "its box would span", "timeout"),
+    ("mdanalysis.nsgrid", [[0.0, 0.0], [0.0, 0.0]], [1e-300, 1e-300], "largest radius 1e-300: a cutoff of 2e-300 is under",
+     "ValueError"),  # "Any of the box dimensions cannot be 0", from inside
+    ("vesin.cells", [[0.0, 0.0], [0.0, 0.0]], [1e-300, 1e-300], "largest radius 1e-300: a cutoff of 2e-300 is under",
+     "RuntimeError"),  # "cutoff is too small"
     ("matscipy.cells", [[0.0, 0.0], [0.0, 0.0]], [1e-300, 1e-300], "largest radius 1e-300: a cutoff of 2e-300 is under",
      "RuntimeError"),  # "Zero cell volume."
     ("coal.tree_array", SPREAD * 100, np.full(50, 1e155), "radius 1e+155 (object 0), over its limit of 1e+150",

@@ -34,6 +34,7 @@ BAD_INPUTS = [
     ("show", ["--backends", "own.grid", "--scene", "{nan}"]),
     ("bench", ["--seconds", "-1"]),
     ("scenes", ["--sizes", "1000000000000"]),
+    ("essay", ["--frames", "100000000000"]),
     ("stress", ["--max-n", "0"]),
     ("stress", ["--max-n", "-5"]),
     ("compare", ["--trajectory", "{empty}"]),

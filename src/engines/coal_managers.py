@@ -18,6 +18,9 @@ from .knobs import HASH_CELL_FACTORS, Knob, mean_diameter, sizes
 from .pairs import canonical
 
 MAX_CONTACTS = 1 << 30
+# Its sphere test sums the radii: two radii of 1e308 sum to infinity and their contact was lost
+# (coal.naive, coal.ssap); below half the largest double every sum is finite.
+RADIUS_SUM = Limits(radius=8e307, why="coal's sphere test sums two radii, which overflows a double past 1.8e308")
 MAX_HASH_CELLS_PER_OBJECT = 1 << 17  # pairs() took 0.04 s for 59k cells, 2 s for 439k, 41 s for 1.6M
 
 
@@ -26,6 +29,7 @@ class _Coal(BroadPhase):
     reports = "contacts"
     dims = (2, 3)
     manager = ""  # the coal class name
+    limits = RADIUS_SUM
 
     def _manager(self, positions, radii):
         return getattr(coal, self.manager)()
@@ -77,7 +81,7 @@ class CoalSap(_Coal):
 
     name, manager, method = "coal.sap", "SaPCollisionManager", "sweep"
     # Segfaults from coordinates of 1e16 on (50 objects spread that far; 7e15 passed).
-    limits = Limits(coordinate=1e15, zero_radius=False,
+    limits = Limits(coordinate=1e15, radius=RADIUS_SUM.radius, zero_radius=False,
                     why="coal's SaP segfaults once coordinates reach 1e16, and on spheres of radius 0")
     breaks = "coal's SaP misses overlaps depending on the order objects were registered in."
 
@@ -101,7 +105,7 @@ class CoalTree(_Coal):
     name, manager, method = "coal.tree", "DynamicAABBTreeCollisionManager", "tree"
     # From coordinates of 1e16 on it raises "The bounding volume has a negative volume", and so it
     # does at update for a box of zero volume (a sphere of radius 0 among others).
-    limits = Limits(coordinate=1e15, zero_radius=False,
+    limits = Limits(coordinate=1e15, radius=RADIUS_SUM.radius, zero_radius=False,
                     why="coal's tree computes negative volumes once coordinates reach 1e16, and rejects boxes of "
                         "zero volume")
 

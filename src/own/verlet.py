@@ -16,6 +16,8 @@ adapts to the motion and the density (own/skin.py).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from engines.base import BroadPhase
@@ -86,6 +88,7 @@ class VerletList(StaticsApart, BroadPhase):
             self._default_skin = self._skin
             self._schedule = SkinSchedule(self._skin, LARGEST_SKIN_DIAMETERS / DEFAULT_SKIN_DIAMETERS * self._skin)
         self._overlapping = None  # the pairs that overlapped in the last frame asked for them
+        self._largest_radius = float(self._radii.max()) if len(self._radii) else 0.0
         if not isinstance(getattr(self, "_grid", None), UniformGrid):
             self._grid = UniformGrid()  # kept across resets, with its pair buffers (rain resets every frame)
         self._built_skin = None
@@ -96,6 +99,8 @@ class VerletList(StaticsApart, BroadPhase):
     def _build(self, positions: np.ndarray) -> None:
         # The grid is moved, not built again, while the fat radii stay (its counting sort keeps
         # last frame's order): at zero skin on the tumbler, 0.306 to 0.2 ms a frame at n = 4096.
+        if not math.isfinite(self._largest_radius + 0.5 * self._skin):
+            self._skin = 0.0  # radii near the largest double leave no room for a skin (exact without one)
         if self._built_skin == self._skin:
             self._grid.update(positions)
         else:
