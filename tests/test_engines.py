@@ -149,7 +149,11 @@ def check_scene(name, positions, radii):
     """One fresh backend on one scene: valid pairs, none missed."""
     backend = make(name)
     try:
-        backend.reset(positions, radii)
+        try:
+            backend.reset(positions, radii)
+        except ValueError as exc:  # a guard's one-line refusal (a hash's cells, say): no pair to miss
+            assert str(exc).startswith(f"{name}: ") and "\n" not in str(exc), exc
+            return None
         return check_frame(backend, as_points(positions), np.asarray(radii, dtype=float))
     finally:
         backend.close()
@@ -449,8 +453,8 @@ REFUSED = [  # (backend, positions, radii, the words of the refusal, what the en
      "FatalError"),  # "mju_makeFrame: xaxis of contact frame undefined"
     ("vesin.cells", SPREAD * 100, np.r_[1e300, np.full(49, 3.0)], "its box would span",
      "SIGFPE"),
-    ("matscipy.cells", SPREAD * 100, np.r_[1e300, np.full(49, 3.0)], "its box would span",
-     "[]"),  # every pair lost
+    ("matscipy.cells", np.vstack([SPREAD[:49] * 10, [[1e308, 1e308]]]), np.full(50, 3.0), "its box would span",
+     "[]"),  # every pair lost, those near the origin too
     ("freud.aabb", SPREAD * 100, np.r_[1e300, np.full(49, 3.0)], "its box would span",
      "RuntimeError"),  # "The AABBQuery r_max is too large for this box."
     # Objects at one point, every pair of them a contact: minutes where the limit is passed.
@@ -469,8 +473,6 @@ REFUSED = [  # (backend, positions, radii, the words of the refusal, what the en
      "ValueError"),  # "Any of the box dimensions cannot be 0", from inside
     ("vesin.cells", [[0.0, 0.0], [0.0, 0.0]], [1e-300, 1e-300], "largest radius 1e-300: a cutoff of 2e-300 is under",
      "RuntimeError"),  # "cutoff is too small"
-    ("matscipy.cells", [[0.0, 0.0], [0.0, 0.0]], [1e-300, 1e-300], "largest radius 1e-300: a cutoff of 2e-300 is under",
-     "RuntimeError"),  # "Zero cell volume."
     ("coal.tree_array", SPREAD * 100, np.full(50, 1e155), "radius 1e+155 (object 0), over its limit of 1e+150",
      "SIGSEGV"),
     ("coal.tree_array", generate("uniform", 1024, seed=0).positions, np.full(1024, 10.0),

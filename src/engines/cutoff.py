@@ -15,6 +15,8 @@ within the cutoff of another (docs/engines.md says which for each).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from own.common import boxes
@@ -54,7 +56,9 @@ class CutoffSearch(BroadPhase):
     reports = "contacts"
     both_ways = False
     dims = (2, 3)
-    precision = "float64"  # what the library computes in (HELD)
+    precision = "float64"  # what the library computes in
+    held = HELD["float64"]  # (smallest cutoff, largest box side) it holds
+    most_cutoffs = math.inf  # the most cutoffs a box side may span
 
     def _reset(self, positions, radii):
         self._cutoff = 2.0 * float(radii.max()) * CUTOFF_PAD if self.n else 0.0
@@ -68,7 +72,7 @@ class CutoffSearch(BroadPhase):
 
     def _check_held(self, positions: np.ndarray) -> None:
         """A one-line refusal of a cutoff or a box its cells and distances cannot hold (HELD)."""
-        smallest, largest = HELD[self.precision]
+        smallest, largest = self.held
         if self._cutoff < smallest:
             raise ValueError(f"{self.name}: largest radius {self._cutoff / 2 / CUTOFF_PAD:.3g}: a cutoff of "
                              f"{self._cutoff:.3g} is under the {smallest:.3g} its {self.precision} cells hold")
@@ -78,6 +82,9 @@ class CutoffSearch(BroadPhase):
             raise ValueError(f"{self.name}: its box would span {side:.3g} (the centres' extent and four cutoffs of "
                              f"{self._cutoff:.3g}), beyond the {largest:.3g} its {self.precision} cells and squared "
                              "distances hold")
+        if not side <= self.most_cutoffs * self._cutoff:
+            raise ValueError(f"{self.name}: its box would span {side / self._cutoff:.3g} cutoffs of {self._cutoff:.3g}, "
+                             f"beyond the {self.most_cutoffs:.3g} its cells hold")
 
     def _pairs(self):
         if self.n < 2 or self._cutoff == 0:  # radius 0 everywhere: only coincident centres touch

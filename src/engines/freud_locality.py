@@ -15,7 +15,7 @@ import freud
 import numpy as np
 
 from .base import FLOAT32_BREAKS
-from .cutoff import CUTOFF_PAD, CutoffSearch, image_free_side, in_3d
+from .cutoff import CUTOFF_PAD, HELD, CutoffSearch, image_free_side, in_3d
 
 # freud runs its queries on every core through TBB unless told otherwise; the study sets backends
 # against each other on one thread (ours too, but for the variants named as using every core). The
@@ -34,6 +34,7 @@ class _FreudQuery(CutoffSearch):
     breaks = FLOAT32_BREAKS
     both_ways = True
     precision = "float32"
+    held = HELD["float32"]
 
     def _build(self, positions):
         self._check_cells(positions)

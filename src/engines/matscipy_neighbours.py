@@ -7,10 +7,12 @@ there is no separate build.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from matscipy.neighbours import neighbour_list
 
-from .cutoff import CutoffSearch, in_3d
+from .cutoff import HELD, CutoffSearch, in_3d
 
 
 class MatscipyCells(CutoffSearch):
@@ -18,12 +20,21 @@ class MatscipyCells(CutoffSearch):
 
     name, method = "matscipy.cells", "grid"
     both_ways = True
+    # Scaled to the cutoff (below), it takes any cutoff whose scale stays a finite power of two,
+    # and a box of up to 1e100 cutoffs (its volume in those units stays finite).
+    held = (1e-300, HELD["float64"][1])
+    most_cutoffs = 1e100
 
     def _query(self):
+        # In units of about the cutoff, scaled by a power of two (exact): matscipy refuses a cell
+        # whose volume is under an absolute threshold ("Zero cell volume": two points of radius
+        # 1e-5 did), whatever the scene's scale.
+        scale = math.ldexp(1.0, -math.frexp(self._cutoff)[1])
         lo = self._positions.min(axis=0)
-        extent = self._positions.max(axis=0) - lo
-        sides = np.maximum(extent, self._cutoff) * (1 + 1e-9)
-        cell = np.diag([sides[0], sides[1], sides[2] if self.dim == 3 else 4.0 * self._cutoff])
-        points = in_3d(self._positions - lo)
-        i, j = neighbour_list("ij", positions=points, cutoff=self._cutoff, cell=cell, pbc=[False, False, False])
+        extent = (self._positions.max(axis=0) - lo) * scale
+        cutoff = self._cutoff * scale
+        sides = np.maximum(extent, cutoff) * (1 + 1e-9)
+        cell = np.diag([sides[0], sides[1], sides[2] if self.dim == 3 else 4.0 * cutoff])
+        points = in_3d((self._positions - lo) * scale)
+        i, j = neighbour_list("ij", positions=points, cutoff=cutoff, cell=cell, pbc=[False, False, False])
         return i, j

@@ -23,7 +23,7 @@ import numpy as np
 from MDAnalysis.lib.nsgrid import FastNS
 
 from .base import FLOAT32_BREAKS, FLOAT32_LIMITS
-from .cutoff import CutoffSearch, in_3d
+from .cutoff import HELD, CutoffSearch, in_3d
 
 
 class MdaFastNS(CutoffSearch):
@@ -33,6 +33,7 @@ class MdaFastNS(CutoffSearch):
     breaks = FLOAT32_BREAKS
     limits = FLOAT32_LIMITS
     precision = "float32"
+    held = HELD["float32"]
 
     def _build(self, positions):
         lo = positions.min(axis=0)

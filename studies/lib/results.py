@@ -359,7 +359,8 @@ def summarise(rows: pd.DataFrame, by: list[str], first: Iterable[str] = (), stat
     share = (ok["missed"] / ok["true_pairs"].where(ok["true_pairs"] > 0)).fillna(0.0)
     table["worst_missed_share"] = share.groupby([ok[c] for c in by], sort=False, dropna=False).max()
     table["setup_s"] = g["t_setup_s"].max()  # building it and its first frame
-    table["compile_s"] = g["t_compile_s"].max()  # the first repeat's: compiling or loading our kernels
+    # The first repeat's: compiling or loading our kernels (rows from before it was measured apart: none).
+    table["compile_s"] = g["t_compile_s"].max() if "t_compile_s" in ok else np.nan
     table["peak_mb"] = g["peak_rss_mb"].max()
     table["tunneled"] = g["tunneled"].last()
     if stats:
