@@ -4,6 +4,7 @@ temporary folder: never results/ or docs/ of the repository), and one temporary 
 whole run, removed at its end, so that what engines and Dask leave in the temporary directory
 (PhysX's hub lock, Dask's scratch space) does not stay on the machine."""
 
+import atexit
 import os
 import shutil
 import tempfile
@@ -20,13 +21,8 @@ def pytest_configure(config):
         folder = tempfile.mkdtemp(prefix="broadphase-tests-")
         os.environ["TMPDIR"] = os.environ["BROADPHASE_TEST_TMPDIR"] = folder
         tempfile.tempdir = None  # gettempdir() reads TMPDIR again
-        config._broadphase_tmpdir = folder
-
-
-def pytest_unconfigure(config):
-    folder = getattr(config, "_broadphase_tmpdir", None)
-    if folder:
-        shutil.rmtree(folder, ignore_errors=True)
+        # Removed at exit, after what registered later (multiprocessing removes its own folder there).
+        atexit.register(shutil.rmtree, folder, ignore_errors=True)
 
 
 settings.register_profile(

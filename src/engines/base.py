@@ -55,8 +55,9 @@ class Limits:
     # Most objects at one identical centre, checked at reset: every pair of them is a contact
     # (k^2 / 2), which engines that make a contact object per pair take minutes to create.
     coincident: int | None = None
-    zero_radius: bool = True  # whether radius 0 is admitted, and boxes of zero width (a radius under half
-    # a unit in the last place of its coordinates: 1e-16 at x = 50)
+    # Whether radius 0 is admitted, and boxes of zero width (a radius under half a unit in the last
+    # place of its coordinates: 1e-16 at x = 50).
+    zero_radius: bool = True
     min_radius: float = 0.0  # smallest positive radius
     objects: int | None = None  # most objects
     why: str = ""
@@ -73,12 +74,9 @@ class Limits:
         if radii is not None and len(radii):
             if not self.zero_radius and radii.min() == 0.0:
                 return f"radius 0 (object {int(radii.argmin())}), which it cannot create"
-            if not self.zero_radius:
-                flat = ((positions + radii[:, None]) == (positions - radii[:, None])).any(axis=1)
-                if flat.any():
-                    k = int(np.flatnonzero(flat)[0])
-                    return (f"radius {radii[k]:.3g} (object {k}), too small to widen its box at coordinates "
-                            f"{positions[k].tolist()}: a box of zero width, which it cannot create")
+            problem = self._flat_problem(positions, radii)
+            if problem:
+                return problem
             positive = np.where(radii > 0, radii, np.inf)
             if self.min_radius > 0 and positive.min() < self.min_radius:
                 return (f"radius {beside(positive.min(), self.min_radius)} (object {int(positive.argmin())}), under "
@@ -86,15 +84,46 @@ class Limits:
             if radii.max() > self.radius:
                 return (f"radius {beside(radii.max(), self.radius)} (object {int(radii.argmax())}), over its limit of "
                         f"{self.radius:.3g}")
-            if self.reach < math.inf:
-                with np.errstate(over="ignore"):
-                    far = np.abs(positions).max(axis=1) + radii
-                if far.max() > self.reach:
-                    k = int(far.argmax())
-                    return (f"object {k} reaches {beside(far[k], self.reach)} from the origin (coordinate plus "
-                            f"radius), beyond its limit of {self.reach:.3g}")
+            return self._reach_problem(positions, radii)
         return None
 
+    def moved_problem(self, positions: np.ndarray, radii: np.ndarray) -> str | None:
+        """What a frame's positions break of the limits (the radii were checked at reset): the
+        coordinates, and where a limit needs them, the boxes' width and reach, each first bounded
+        by the extremes alone (a few us a frame, in the engine's update time)."""
+        n = len(positions)
+        if not n or (self.coordinate == math.inf and self.zero_radius and self.reach == math.inf):
+            return None
+        with np.errstate(over="ignore"):
+            largest = max(float(positions.max()), -float(positions.min()))
+        if largest > self.coordinate:
+            return f"coordinates up to {beside(largest, self.coordinate)}, beyond its limit of {self.coordinate:.3g}"
+        if not self.zero_radius and float(radii.min()) <= 2.0 * float(np.spacing(largest)):
+            return self._flat_problem(positions, radii)
+        if self.reach < math.inf and largest + float(radii.max()) > self.reach:
+            return self._reach_problem(positions, radii)
+        return None
+
+    def _flat_problem(self, positions: np.ndarray, radii: np.ndarray) -> str | None:
+        if self.zero_radius:
+            return None
+        flat = ((positions + radii[:, None]) == (positions - radii[:, None])).any(axis=1)
+        if not flat.any():
+            return None
+        k = int(np.flatnonzero(flat)[0])
+        return (f"radius {radii[k]:.3g} (object {k}), too small to widen its box at coordinates "
+                f"{positions[k].tolist()}: a box of zero width, which it cannot create")
+
+    def _reach_problem(self, positions: np.ndarray, radii: np.ndarray) -> str | None:
+        if self.reach == math.inf:
+            return None
+        with np.errstate(over="ignore"):
+            far = np.abs(positions).max(axis=1) + radii
+        if far.max() <= self.reach:
+            return None
+        k = int(far.argmax())
+        return (f"object {k} reaches {beside(far[k], self.reach)} from the origin (coordinate plus radius), beyond "
+                f"its limit of {self.reach:.3g}")
 
     def crowd_problem(self, positions: np.ndarray) -> str | None:
         """More objects at one identical centre than `coincident`, or None (at reset: a sort)."""
@@ -229,7 +258,7 @@ class BroadPhase(ABC):
         if not self._built:
             raise RuntimeError(f"{self.name}: call reset(positions, radii) before update()")
         pos = check_positions(positions, self.objects, dims=(self.dim,))
-        self._check_limits(pos, self._all_radii)  # a box may lose its width where it moved
+        self._check_limits(pos, self._all_radii, moved=True)
         changed = False
         if alive is not None:
             alive = check_mask(alive, (self.objects,), "alive")
@@ -286,10 +315,13 @@ class BroadPhase(ABC):
         self._held_positions = np.ascontiguousarray(positions[self._alive_ids])
         self._reset(self._held_positions, self.radii)
 
-    def _check_limits(self, positions: np.ndarray, radii: np.ndarray | None = None, reset: bool = False) -> None:
+    def _check_limits(self, positions: np.ndarray, radii: np.ndarray | None = None, reset: bool = False,
+                      moved: bool = False) -> None:
+        """At reset every limit; at update (`moved`) what moving can break (a box may lose its
+        width or reach too far where it went)."""
         if self.limits is NO_LIMITS:  # our own backends: no cost per frame
             return
-        problem = self.limits.problem(positions, radii)
+        problem = self.limits.moved_problem(positions, radii) if moved else self.limits.problem(positions, radii)
         if not problem and reset:  # the objects alive now
             problem = self.limits.crowd_problem(positions if self.alive is None else positions[self.alive])
         if problem:

@@ -75,9 +75,9 @@ class Job:
     @property
     def setup_limit_s(self) -> float:
         """How long building the backend and its warm-up frame may take: SETUP_BUDGETS times the
-        budget per frame, at least SETUP_FLOOR_S (an engine's world), at most the timeout. (Our
-        kernels are compiled before it starts, see compiling.py.) Without it a hopeless backend (brute force at n = 10^7) spent all of its timeout
-        before its first timed frame could be judged."""
+        budget per frame, at least SETUP_FLOOR_S (an engine's world), at most the timeout; our
+        kernels are compiled before it starts (compiling.py). Without it a hopeless backend (brute
+        force at n = 10^7) spent all of its timeout before its first timed frame could be judged."""
         return min(self.timeout_s, max(SETUP_FLOOR_S, SETUP_BUDGETS * self.budget_s))
 
     @property
