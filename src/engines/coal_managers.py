@@ -45,14 +45,20 @@ class _Coal(BroadPhase):
         self._id_order = np.argsort(ids)
         self._sorted_ids = ids[self._id_order]
         self._mgr = self._manager(positions, radii)
+        self._register()
+
+    def _register(self) -> None:
         for obj in self._objects:  # the binding registers objects one by one
             self._mgr.registerObject(obj)
         self._mgr.setup()
 
-    def _update(self, positions):
+    def _move(self, positions) -> None:
         for obj, xyz in zip(self._objects, in_3d(positions)):
             obj.setTranslation(xyz)
             obj.computeAABB()
+
+    def _update(self, positions):
+        self._move(positions)
         self._mgr.update()
 
     def _indices(self, ids: np.ndarray) -> np.ndarray:
@@ -127,17 +133,14 @@ class CoalTreeArray(_Coal):
     limits = Limits(coordinate=1e150, radius=1e150, objects=512,
                     why="coal's array tree reads its node array after freeing it: from about 800 objects "
                         "that can segfault; boxes beyond ~1e154 overflow")
+
     def _update(self, positions):
         # Its update() refits the tree wrongly: on a settling pile of 200 balls it returned 0 to 10
         # of 80 to 390 contacts from the second frame on, whether the whole manager or each object
         # was updated (evidence: test_engines); clear + register + setup is exact.
-        for obj, xyz in zip(self._objects, in_3d(positions)):
-            obj.setTranslation(xyz)
-            obj.computeAABB()
+        self._move(positions)
         self._mgr.clear()
-        for obj in self._objects:
-            self._mgr.registerObject(obj)
-        self._mgr.setup()
+        self._register()
 
 
 class CoalHash(_Coal):

@@ -86,16 +86,21 @@ def fullest_frame(traj: Trajectory) -> int:
     return int(traj.alive.sum(axis=1).argmax()) if traj.alive is not None and traj.frames else 0
 
 
-def _coverage(traj: Trajectory) -> tuple[float, bool]:
-    """(coverage, whether over the occupied box): a generated scene's objects over its box; a
-    recorded scene's objects alive in its fullest frame over the box they occupy there (its
-    file's box spans every frame, and its slots include objects not yet spawned or gone)."""
-    if traj.scene.motion is None:
-        return coverage(traj.scene.radii, traj.scene.box), False
+def alive_in_fullest_frame(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+    """(positions, radii) of the objects alive in the first frame with the most of them alive."""
     f = fullest_frame(traj)
     here = traj.alive_at(f)
-    here = np.ones(traj.scene.n, dtype=bool) if here is None else here
-    pos, radii = traj.positions[f][here], traj.scene.radii[here]
+    pos, radii = traj.positions[f], traj.scene.radii
+    return (pos, radii) if here is None else (pos[here], radii[here])
+
+
+def _coverage(traj: Trajectory, pos: np.ndarray, radii: np.ndarray) -> tuple[float, bool]:
+    """(coverage, whether over the occupied box): a generated scene's objects over its box; a
+    recorded scene's objects alive in its fullest frame (`pos`, `radii`) over the box they
+    occupy there (its file's box spans every frame, and its slots include objects not yet
+    spawned or gone)."""
+    if traj.scene.motion is None:
+        return coverage(traj.scene.radii, traj.scene.box), False
     if not len(radii):
         return 0.0, True
     box = tuple((pos - radii[:, None]).min(axis=0)) + tuple((pos + radii[:, None]).max(axis=0))
@@ -111,17 +116,13 @@ def covering_words(share: float, occupied: bool, dim: int) -> str:
 
 def covering(traj: Trajectory) -> str:
     """The scene's coverage in words, as compare and recommend print it."""
-    return covering_words(*_coverage(traj), traj.scene.dim)
+    return covering_words(*_coverage(traj, *alive_in_fullest_frame(traj)), traj.scene.dim)
 
 
 def measure_traits(traj: Trajectory) -> Traits:
     """The traits of the objects alive: where and how large in the fullest frame, how they move
     over every frame."""
-    f = fullest_frame(traj)
-    here = traj.alive_at(f)
-    pos, radii = traj.positions[f], traj.scene.radii
-    if here is not None:
-        pos, radii = pos[here], radii[here]
+    pos, radii = alive_in_fullest_frame(traj)
     n, dim = pos.shape
     positive = radii[radii > 0]
     spread = float(positive.max() / positive.min()) if len(positive) else 1.0
@@ -163,6 +164,6 @@ def measure_traits(traj: Trajectory) -> Traits:
     fast = float((in_radii > 1.0).mean()) if recorded else 0.0
     spawns = float(np.abs(np.diff(alive.astype(np.int8), axis=0)).sum() / ((traj.frames - 1) * n)) \
         if traj.alive is not None and traj.frames > 1 and n else 0.0
-    covered, occupied = _coverage(traj)
+    covered, occupied = _coverage(traj, pos, radii)
     return Traits(n, spread, dispersion, float(conc[0]), float(conc[1]), step, covered,
                   traj.scene.static_share, spawns, resting, fast, float(conc[2]) if dim == 3 else 1.0, dim, occupied)
