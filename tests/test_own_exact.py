@@ -340,6 +340,7 @@ def test_coherent_sorts_repair_small_motion_and_resort_after_large(name):
 
 # The incremental grids, one thread and chunked on every core, general and specialised.
 INCREMENTAL = [("own.grid_incremental", {}), ("own.grid_incremental", {"cell": 5.0}),
+               ("own.grid_incremental", {"candidates": "kept"}), ("own.grid_incremental", {"cell": 5.0, "candidates": "kept"}),
                ("own.grid_incremental", {"specialise": False}), ("own.grid_parallel", {"parallel_from": 0}),
                ("own.grid_parallel", {"parallel_from": 0, "cell": 5.0})]
 
@@ -388,7 +389,7 @@ def test_incremental_grids_leave_out_radius_reads_only_where_every_radius_is_equ
         np.testing.assert_array_equal(special, keys(traj.box_pairs[f], 3000))
 
 
-@pytest.mark.parametrize(("name", "params"), [("own.grid_incremental", {"p": 12}),
+@pytest.mark.parametrize(("name", "params"), [("own.grid_incremental", {"p": 12, "candidates": "kept"}),
                                               ("own.grid_parallel", {"p": 12, "parallel_from": 0})])
 def test_incremental_grids_stay_exact_when_the_scene_stops_qualifying_mid_run(name, params):
     # One radius for all, and every object smaller than a cell, until the scene contracts: p x p
@@ -446,10 +447,56 @@ def test_grid_parallel_rebuilds_when_a_chunk_has_no_room_for_its_new_candidates(
     assert rebuilt == [1, 1, 1, 1]  # every frame overflowed the first chunk, and rebuilt exactly
 
 
+def _incremental_frames(grid, frames, radii):
+    """Each frame's plain_search flag, the pairs checked against brute force on the way."""
+    searched_plain = []
+    for positions in frames:
+        grid.update(positions)
+        grid.validate()
+        np.testing.assert_array_equal(np.sort(keys(grid.pairs(), len(positions))),
+                                      np.sort(keys(brute_pairs(positions, radii), len(positions))))
+        searched_plain.append(grid.stats()["plain_search"])
+    return searched_plain
+
+
+def test_grid_incremental_searches_plain_where_kept_candidates_do_not_pay_and_keeps_them_again_after(monkeypatch):
+    monkeypatch.setattr(grid_incremental, "KEEP_AFTER_QUIET_FRAMES", 3)
+    rng = np.random.default_rng(5)
+    # A packed block (about 8 candidates an object, as in a settled pile), jittering in place ...
+    side = 40
+    packed = np.stack(np.meshgrid(np.arange(side), np.arange(side)), axis=-1).reshape(-1, 2) * 1.6
+    radii = np.full(len(packed), 1.0)
+    grid = engines.create("own.grid_incremental")
+    grid.reset(packed, radii)
+    assert grid.stats()["plain_search"] == 0 and grid.stats()["candidates"] > 2 * len(packed)
+    # (the block's edge rows and columns stay put, so that the extent, and the grid's layout, do).
+    inner = ((packed > 0) & (packed < packed.max())).all(axis=1)[:, None]
+    jitter = [packed + inner * rng.normal(0.0, 0.01, packed.shape) for _ in range(3)]
+    # ... then spread ten times apart (under one candidate an object), drifting a little a frame.
+    spread = [packed * 10.0 + inner * rng.normal(0.0, 0.01, packed.shape) for _ in range(6)]
+    assert _incremental_frames(grid, jitter + spread, radii) == [1, 1, 1, 1, 1, 1, 1, 0, 0]
+    assert grid.stats()["rebuilt"] == 0  # kept again, updated rather than rebuilt
+
+
+def test_grid_incremental_searches_plain_once_movers_force_rebuilds():
+    scene = generate("uniform", 2000, seed=3)  # the essay's scene: few candidates an object
+    rng = np.random.default_rng(3)
+    frames = [rng.permutation(scene.positions) for _ in range(3)]  # everything jumps every frame
+    for candidates, expected in (("auto", [0, 1, 1]), ("kept", [0, 0, 0])):
+        grid = engines.create("own.grid_incremental", candidates=candidates)
+        grid.reset(scene.positions, scene.radii)
+        assert _incremental_frames(grid, frames, scene.radii) == expected
+
+
+def test_grid_incremental_refuses_an_unknown_candidates_setting():
+    with pytest.raises(ValueError, match="candidates must be one of auto, kept"):
+        engines.create("own.grid_incremental", candidates="always")
+
+
 def test_grid_incremental_updates_its_candidates_while_few_objects_change_cell():
     scene = generate("uniform", 2000, radii=(2.0, 60.0), seed=9)  # a few objects larger than a cell
     traj = simulate(scene, frames=8)
-    grid = engines.create("own.grid_incremental")
+    grid = engines.create("own.grid_incremental", candidates="kept")  # the kept candidates' own bookkeeping
     grid.reset(traj.positions[0], traj.scene.radii)
     assert grid.stats()["rebuilt"] == 1
     for f in range(1, traj.frames):
@@ -465,7 +512,7 @@ def test_grid_incremental_updates_its_candidates_while_few_objects_change_cell()
 def test_grid_incremental_renumbers_its_objects_in_cell_order_after_enough_moves(monkeypatch):
     monkeypatch.setattr(grid_incremental, "RENEW_AFTER_MOVES_PER_OBJECT", 0)  # after any move
     traj = simulate(generate("uniform", 2000, seed=9), frames=4)
-    grid = engines.create("own.grid_incremental")
+    grid = engines.create("own.grid_incremental", candidates="kept")
     grid.reset(traj.positions[0], traj.scene.radii)
     rebuilt = []
     for f in range(1, traj.frames):
@@ -479,7 +526,7 @@ def test_grid_incremental_renumbers_its_objects_in_cell_order_after_enough_moves
 def test_grid_incremental_rebuilds_into_a_larger_grid_when_the_scene_spreads_out():
     positions = np.random.default_rng(4).uniform(0.0, 60.0, (1000, 2))
     radii = np.full(1000, 1.0)
-    grid = engines.create("own.grid_incremental")
+    grid = engines.create("own.grid_incremental", candidates="kept")  # "auto" would search plain after one
     grid.reset(positions, radii)
     cells = len(grid.structure()["cells"])
     for spread in (1.5, 2.0, 2.0):  # every frame outgrows the layout's slack: a new layout, more cells

@@ -22,7 +22,7 @@ import numba as nb
 import numpy as np
 
 from .common import PairCollector, centre_extents, emit, radius_of
-from .grid import (CellLayout, cell_key, covered_cells, gather_centres, grid_layout, key_space, large_against_large,
+from .grid import (CellLayout, SquareGrid, cell_key, covered_cells, gather_centres, grid_layout, key_space, large_against_large,
                    small_limit)
 from .grid3d import CubesForSpheres
 from .statics import StaticsApart
@@ -40,6 +40,20 @@ RENEW_AFTER_MOVES_PER_OBJECT = 1
 # clamped into the edge cells): a new layout means a rebuild, and with none an object stepping
 # past the scene's extent, as every one at the edge does in turn, would cause one.
 LAYOUT_SLACK_CELLS = 4.0
+# `candidates="auto"`: kept candidates pay only while they are few and few objects change cell.
+# A frame of kept candidates costs about 9 ns an object and 6 a candidate (two passes over them,
+# reading centres by rank), own.grid's plain search 19 and 1.3 (one pass over its cells, vectorised):
+# measured on the essay's scene (0.85 candidates an object, kept 1.5x faster), a clustered one and a
+# settled pile (7.6 and 8.3, kept 1.9x slower), which puts the crossover near 2.3 candidates an
+# object. A frame that rebuilds (everything moving: a tumbler, a drum, balls falling through pegs)
+# costs 2-2.5x a plain one. So the backend searches plain once it measured more candidates than
+# this per object, or a rebuild it had to make ...
+KEEP_MAX_CANDIDATES_PER_OBJECT = 2.0
+# ... and keeps candidates again once the plain search has tested at most this many pairs per
+# object, with at most half the movers that would force a rebuild, for this many frames running.
+KEEP_FROM_TESTS_PER_OBJECT = 1.5
+KEEP_AFTER_QUIET_FRAMES = 8
+CANDIDATES = ("auto", "kept")
 
 
 @nb.njit(cache=True, inline="always")
@@ -345,18 +359,47 @@ class IncrementalSquares(StaticsApart, CellLayout):
     radius reads where every radius is equal (off: the general kernels, to measure the saving).
     Fast while few objects change cell per frame; a frame where many do (fast movers, a teleport)
     rebuilds, at 1.1-1.3x the cost of an own.grid frame (every object jumping: 0.033 against 0.029
-    ms at n = 2048, 3.9 against 3.1 ms at n = 131072).
+    ms at n = 2048, 3.9 against 3.1 ms at n = 131072). `candidates` "auto" (the default) searches
+    as own.grid does, with no candidates kept, while what it measures says kept ones do not pay
+    (many candidates per object, or rebuilds forced by movers; see KEEP_MAX_CANDIDATES_PER_OBJECT),
+    and keeps them again once the scene calms down; "kept" always keeps them.
     """
 
     name = "own.grid_incremental"
-    defaults = {"p": None, "cell": None, "specialise": True}
+    defaults = {"p": None, "cell": None, "specialise": True, "candidates": "auto"}
 
     def __init__(self, **params):
         super().__init__(**params)
+        if self.params["candidates"] not in CANDIDATES:
+            raise ValueError(f"{self.name}: candidates must be one of {', '.join(CANDIDATES)}, "
+                             f"got {self.params['candidates']!r}")
         self._collect = PairCollector()
         self._counters: list = []
+        self._plain: SquareGrid | None = None  # the plain search, while kept candidates do not pay
+
+    def _may_search_plain(self) -> bool:
+        return self.params["candidates"] == "auto"
 
     def _reset(self, positions, radii):
+        self._switch = False
+        if self._built and self._may_search_plain():
+            # Objects appeared or went (the "rebuild" lifecycle): everything is built afresh, which
+            # the plain search does at a third of the cost of kept candidates.
+            self._search_plain(positions)
+            return
+        self._plain = None
+        self._keep_candidates(positions, radii)
+
+    def _search_plain(self, positions):
+        """own.grid's search from now on, built on these positions."""
+        if self._plain is None:
+            self._plain = SquareGrid(p=self.params["p"], cell=self.params["cell"], specialise=self.params["specialise"])
+            self._plain.small_scene_n = 0  # the structure at every size, as this backend's
+        self._plain.reset(positions, self.radii)
+        self._quiet = 0
+
+    def _keep_candidates(self, positions, radii):
+        """Build the kept candidates' structures from scratch (at a reset, or back from the plain search)."""
         n = self.n
         self._start_layout(radii)
         self._state = new_state(n)
@@ -367,7 +410,39 @@ class IncrementalSquares(StaticsApart, CellLayout):
         self._moved = np.zeros(n, dtype=np.uint8)
         self._m = -1  # no candidates yet
         self._moves = 0  # objects that changed cell since the last rebuild
-        self._update(positions)
+        self._kept_update(positions, chosen=True)
+
+    def _update(self, positions):
+        if self._switch:  # decided last frame, from what it measured
+            self._switch = False
+            if self._plain is None:
+                self._search_plain(positions)
+                return
+            self._plain = None
+            self._keep_candidates(positions, self.radii)
+            return
+        if self._plain is not None:
+            self._plain._update(positions)
+        else:
+            self._kept_update(positions, chosen=False)
+
+    def _kept_update(self, positions, chosen: bool):
+        """This frame's kept candidates; `chosen`: a rebuild here is the backend's own choice (a
+        reset, or back from the plain search), not one forced by the scene."""
+        renew = self._moves > RENEW_AFTER_MOVES_PER_OBJECT * self.n
+        self._limit, self._m, moved, rebuilt = incremental_step(
+            positions, self.radii, self._radius, self._p, self._cell, self._max_cells, self._layout, self._state,
+            self._head, self._cand, -1 if renew else self._m, self._movers, self._moved,
+            self.n // REBUILD_MOVERS_DIVISOR)
+        self._moves = 0 if rebuilt else self._moves + moved
+        if not 0 <= self._m <= len(self._cand):
+            self._grow_and_rebuild(positions)
+        # Kept raw, made a dict only when asked (as own.grid does: a dict every frame costs 2%).
+        self._counters = [moved, int(rebuilt), self._m, None]  # tests: once the pairs are asked for
+        forced = rebuilt and not (chosen or renew)
+        if self._may_search_plain() and (forced or self._m > KEEP_MAX_CANDIDATES_PER_OBJECT * self.n):
+            self._switch = True
+
 
     def _new_candidates(self, rows: int) -> None:
         """Room for this many candidate pairs, before the first rebuild."""
@@ -380,18 +455,6 @@ class IncrementalSquares(StaticsApart, CellLayout):
         self._radius = self.radii if self._one is None else self._one
         self._radius_by_rank = self._state[2] if self._one is None else self._one
 
-    def _update(self, positions):
-        renew = self._moves > RENEW_AFTER_MOVES_PER_OBJECT * self.n
-        self._limit, self._m, moved, rebuilt = incremental_step(
-            positions, self.radii, self._radius, self._p, self._cell, self._max_cells, self._layout, self._state,
-            self._head, self._cand, -1 if renew else self._m, self._movers, self._moved,
-            self.n // REBUILD_MOVERS_DIVISOR)
-        self._moves = 0 if rebuilt else self._moves + moved
-        if not 0 <= self._m <= len(self._cand):
-            self._grow_and_rebuild(positions)
-        # Kept raw, made a dict only when asked (as own.grid does: a dict every frame costs 2%).
-        self._counters = [moved, int(rebuilt), self._m, None]  # tests: once the pairs are asked for
-
     def _grow_and_rebuild(self, positions):
         """Rebuild into a head sized for the layout and as many candidate rows as it needs."""
         self._head = np.empty(head_length(self._layout), dtype=np.int64)
@@ -403,23 +466,40 @@ class IncrementalSquares(StaticsApart, CellLayout):
                                           self._cand)
 
     def _pairs(self):
+        if self._plain is not None:
+            out = self._plain._pairs()
+            counters = self._plain._counters
+            quiet = (counters["tests"] <= KEEP_FROM_TESTS_PER_OBJECT * self.n
+                     and counters["moved"] <= self.n // (2 * REBUILD_MOVERS_DIVISOR))
+            self._quiet = self._quiet + 1 if quiet else 0
+            self._switch = self._quiet >= KEEP_AFTER_QUIET_FRAMES
+            return out
         out, (tests,) = self._collect(incremental_pairs, self._state, self._radius_by_rank, self._head, self._cand,
                                       self._m, self._layout, self._limit, at_least=self._m)
         self._counters[3] = tests
         return out
 
     def stats(self):
+        if self._plain is not None:
+            return {**self._plain.stats(), "plain_search": 1}
         if not self._counters:  # nothing built yet
             return {}
         moved, rebuilt, candidates, tests = self._counters
         tested = {} if tests is None else {"tests": tests}
-        return {"moved": moved, "rebuilt": rebuilt, "candidates": candidates, **tested, **self._left_out}
+        return {"moved": moved, "rebuilt": rebuilt, "candidates": candidates, **tested, "plain_search": 0,
+                **self._left_out}
 
     def _candidates(self) -> np.ndarray:
         """The candidate pairs of ranks, (m, 2)."""
         return self._cand[:self._m]
 
+    def structure(self):
+        return self._plain.structure() if self._plain is not None else super().structure()
+
     def validate(self):
+        if self._plain is not None:
+            self._plain.validate()
+            return
         perm, rank, xy, sr, rkey, nxt, prv, okey = unpack(self._state)
         head = self._head
         w, large = key_space(self._layout)[6:]

@@ -198,7 +198,7 @@ def large_only(state, head, layout, limit, tests, buf):
 class ParallelSquares(IncrementalSquares):
     """own.grid_parallel over circles: own.grid_incremental with each frame split over every core
     (see the module's docstring), from `parallel_from` objects on; below that, one thread exactly
-    as own.grid_incremental."""
+    as own.grid_incremental (its plain search too, where kept candidates do not pay)."""
 
     name = "own.grid_parallel"
     defaults = {**IncrementalSquares.defaults, "parallel_from": PARALLEL_FROM_OBJECTS}
@@ -227,9 +227,12 @@ class ParallelSquares(IncrementalSquares):
         self._cand = np.empty((chunks, rows, 2), dtype=np.int64)
         self._hits = np.empty((chunks, rows, 2), dtype=np.int64)
 
-    def _update(self, positions):
+    def _may_search_plain(self) -> bool:
+        return super()._may_search_plain() and not self._chunked  # on every core, candidates are kept
+
+    def _kept_update(self, positions, chosen: bool):
         if not self._chunked:
-            super()._update(positions)
+            super()._kept_update(positions, chosen)
             return
         renew = self._moves > RENEW_AFTER_MOVES_PER_OBJECT * self.n
         self._limit, self._m, moved, rebuilt = chunked_step(
