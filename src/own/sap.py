@@ -7,8 +7,11 @@ import numpy as np
 
 from engines.base import BroadPhase
 from engines.knobs import Knob, fixed
+from scenes.scene import shown
 
+from .coherent import RepairSchedule
 from .common import PairCollector, emit, gather, insertion_sort
+from .skin import FILTER_KERNELS, STEP_KERNELS, SkinSchedule
 from .parallel import ChunkedPairCollector
 from .radix import radix_argsort, sortable_bits
 from .sap3d import Sweep3
@@ -43,6 +46,10 @@ MAX_SPARSE_N = 2**31 - 1
 # 0.59 against 0.77 ms); on numba's workqueue layer, whose hand-off costs far more, it paid only
 # from about 2^23.
 PARALLEL_FROM_OVERLAPS = 2**19
+# The skin the sweep starts with, and the most it grows to, in mean diameters (own/skin.py), as the
+# trees' and the Verlet list's: between builds the pairs of the boxes grown by half the skin are
+# kept and tested, so that objects at rest are not sorted or swept again.
+SAP_SKIN_DIAMETERS, LARGEST_SAP_SKIN_DIAMETERS = 0.25, 1.0
 
 
 @nb.njit(cache=True)
@@ -271,6 +278,12 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
     three along which the centres vary most, repaired between frames where incremental
     (own/sap3d.py), in columns over the other two axes where `strips` says (the strips' 3D form);
     the sparse sweep and the parallel sweep are not taken there yet.
+
+    `skin` (None: a quarter of a mean diameter, adapting to the motion as the trees' does; a
+    distance; 0: none) sweeps the boxes grown by half the skin and keeps their pairs: while no
+    object has moved skin / 2 since, a frame only tests those pairs (own/skin.py), so that objects
+    at rest (a settled pile, most of the essay's scene between two frames) are neither sorted nor
+    swept again. Where everything moves, the skin drops to zero and every frame sorts and sweeps.
     """
 
     name = "own.sap"
@@ -282,7 +295,7 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
               Knob("sweep", fixed(["plain", "sparse", "auto"]), "sweep", dims=(2,)),
               Knob("strips", fixed(["on", "off", "auto"]), "strips (columns over spheres)"))
     defaults = {"axis": "auto", "incremental": False, "sweep": "auto", "strips": "auto", "parallel": False,
-                "parallel_from": PARALLEL_FROM_OVERLAPS}
+                "parallel_from": PARALLEL_FROM_OVERLAPS, "skin": None}
 
     def __init__(self, **params):
         super().__init__(**params)
@@ -294,6 +307,10 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         self._parallel_from = self._int_param("parallel_from", 0)
         self._collect = PairCollector()
         self._collect_chunks = ChunkedPairCollector() if self.params["parallel"] else None
+        skin = self.params["skin"]
+        if skin is not None and not (isinstance(skin, (int, float)) and np.isfinite(skin) and skin >= 0):
+            raise ValueError(f"{self.name}: skin must be a distance >= 0, got {shown(skin)}")
+        self._filter_collect = PairCollector()
 
     def _positions_to_reset(self, positions):
         pos = super()._positions_to_reset(positions)
@@ -302,14 +319,40 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         return pos
 
     def _reset(self, positions, radii):
+        if self.dim == 3 and (self.params["sweep"] == "sparse" or self.params["parallel"]):
+            raise ValueError(f"{self.name}: sweep='sparse' and parallel are not taken over spheres yet")
+        self._largest_step, self._filter = STEP_KERNELS[self.dim], FILTER_KERNELS[self.dim]
+        self._adapts = self.params["skin"] is None
+        if self._built and self._adapts:
+            # Built anew in a run, for the objects that appeared or went: the last sweep's pairs
+            # lived until now, and the skin goes on adapting (as the trees' does).
+            self._skin = self._skins.next(self._since + 1)
+        else:
+            positive = radii[radii > 0]
+            diameter = 2.0 * float(positive.mean()) if len(positive) else 0.0
+            start = SAP_SKIN_DIAMETERS * diameter if self._adapts else float(self.params["skin"])
+            self._skins = SkinSchedule(start, LARGEST_SAP_SKIN_DIAMETERS / SAP_SKIN_DIAMETERS * start)
+            self._skin = self._skins.skin
+        self._builds = 0
+        self._overlapping = None  # the pairs that overlapped in the last frame asked for them
+        self._largest_radius = float(radii.max()) if len(radii) else 0.0
+        self._start_sweep(positions)
+
+    def _start_sweep(self, positions):
+        """The sweep's state, built for this skin's grown boxes, and this frame's sort."""
+        if not np.isfinite(self._largest_radius + 0.5 * self._skin):
+            self._skin = 0.0  # radii near the largest double leave no room for a skin (exact without one)
+        self._swept_skin = self._skin
+        self._sweep_radii = self.radii + 0.5 * self._skin if self._skin > 0.0 else self.radii
         self._sweep3 = None
         if self.dim == 3:
-            if self.params["sweep"] == "sparse" or self.params["parallel"]:
-                raise ValueError(f"{self.name}: sweep='sparse' and parallel are not taken over spheres yet")
-            self._sweep3 = Sweep3(radii, self.params["axis"], self._incremental, self.params["strips"])
-            self._update(positions)
+            self._sweep3 = Sweep3(self._sweep_radii, self.params["axis"], self._incremental, self.params["strips"])
+            self._build(positions)
             return
         n = self.n
+        # Where a repair gave up (everything moving: a tumbler, a drum), the next ones are likely
+        # to as well, each after costing more than the sort: tried again only now and then.
+        self._repairs = RepairSchedule()
         # The last scene's counts are no guide to this one.
         self._last_pairs, self._last_overlaps, self._float32_too_coarse = None, 0, False
         # The order is double-buffered (the repair reads last frame's while it writes this
@@ -339,7 +382,7 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
             if self.params["strips"] != "off":
                 self._collect_chunks(strip_sweep_parallel, no_order, nothing, nothing, nothing, nothing,
                                      np.zeros(1, dtype=np.int64), nothing)
-        self._update(positions)
+        self._build(positions)
 
     def _sparse_sweep(self) -> bool:
         """Whether this frame sweeps with sap_sweep_sparse: pair counts change little between frames."""
@@ -352,6 +395,28 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
                 and not self._float32_too_coarse)
 
     def _update(self, positions):
+        self._positions = positions
+        self._since += 1
+        if self._skin > 0.0 and self._largest_step(positions, self._anchor) <= 0.5 * self._skin:
+            self._stats = {**self._stats, "reused": 1}
+            return
+        if self._adapts:
+            kept = len(self._kept) if self._kept is not None else None
+            self._skin = self._skins.next(self._since, kept, self._overlapping, self.n)
+        if self._skin != self._swept_skin:
+            self._start_sweep(positions)  # boxes grown by another skin: sorted afresh
+        else:
+            self._build(positions)
+
+    def _build(self, positions):
+        """Sort for this frame's sweep of the boxes grown by half the skin, whose pairs are kept."""
+        self._sweep_update(positions)
+        self._positions, self._since, self._kept = positions, 0, None
+        self._anchor = positions.copy() if self._skin > 0.0 else None  # where the boxes were grown from
+        self._builds += 1
+        self._stats.update({"skin": self._skin, "builds": self._builds, "reused": 0})
+
+    def _sweep_update(self, positions):
         if self._sweep3 is not None:
             self._sweep3.update(positions)
             self._stats = self._sweep3.stats()
@@ -360,25 +425,32 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
             return
         self._strips = 0
         self._sparse = self._sparse_sweep()
-        axis, swaps = sap_prepare(positions, self.radii, self._axis_mode, self._order, self._incremental,
+        repair, last = self._repair_due(), self._order[self.n]
+        axis, swaps = sap_prepare(positions, self._sweep_radii, self._axis_mode, self._order, repair,
                                   self._spare_order, self._work, self._sorted,
                                   self._bounds32 if self._sparse else self._no_bounds32)
+        self._repairs.record(repair and last == axis, swaps)  # tried only on last frame's order for this axis
         self._order, self._spare_order = self._spare_order, self._order
         self._stats = {"axis": axis, "swaps": swaps, "sparse_sweep": int(self._sparse), "crowded_windows": 0,
                        "strips": 0}
 
+    def _repair_due(self) -> bool:
+        return self._incremental and self._repairs.due(True)
+
     def _strip_update(self, positions) -> bool:
         """Sort for a strip sweep, where strips pay (or are asked for) and hold; False: sweep plain."""
         last = self._order[self.n]  # axis + 2 after a strip sweep
-        plan = strip_plan(positions, self.radii, self._axis_mode, self.params["strips"] == "on", last - 2 if last >= 2 else -1)
+        plan = strip_plan(positions, self._sweep_radii, self._axis_mode, self.params["strips"] == "on", last - 2 if last >= 2 else -1)
         axis, strips = plan[0], plan[3]
         if not strips:
             return False
-        swaps = strip_prepare(positions, self.radii, plan, self._order, self._incremental, self._spare_order,
+        repair = self._repair_due()
+        swaps = strip_prepare(positions, self._sweep_radii, plan, self._order, repair, self._spare_order,
                               self._work, self._sorted, self._strip_start[:strips + 1], self._strip_width[:strips],
                               self._strip_of)
         if swaps == -2:
             return False
+        self._repairs.record(repair and last == axis + 2, swaps)
         self._order, self._spare_order = self._spare_order, self._order
         self._strips, self._sparse = strips, False
         self._stats = {"axis": axis, "swaps": swaps, "sparse_sweep": 0, "crowded_windows": 0, "strips": strips}
@@ -396,9 +468,21 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         return out
 
     def _pairs(self):
+        if self._skin == 0.0:
+            out = self._sweep_pairs()
+            self._overlapping = len(out)
+            return out
+        if self._kept is None:  # the frame of the build: the grown boxes' pairs, kept
+            self._kept = self._sweep_pairs().copy()
+        out, _ = self._filter_collect(self._filter, self._kept, self._positions, self.radii)
+        self._overlapping = len(out)
+        self._stats["kept"] = len(self._kept)
+        return out
+
+    def _sweep_pairs(self):
         if self._sweep3 is not None:
             out = self._sweep3.pairs()
-            self._stats = self._sweep3.stats()
+            self._stats = {**self._stats, **self._sweep3.stats()}
             return out
         if self._strips:
             return self._strip_pairs()
@@ -428,6 +512,8 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         return {"intervals": np.column_stack([s_lo, s_hi]), "axis": np.array(self._stats["axis"])}
 
     def validate(self):
+        if self._skin > 0.0:
+            assert self._largest_step(self._positions, self._anchor) <= 0.5 * self._skin, "an object outran the skin"
         if self._sweep3 is not None:
             self._sweep3.validate()
             return
