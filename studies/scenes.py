@@ -1,7 +1,7 @@
 """`python -m studies.scenes`: every backend on every scene family, essay's motion and recorded.
 
 The essay's motion (free flight at one speed) beside the families a real project has, recorded
-with pymunk (scenes/families.py: pile, rain, tumbler, smash, level), at each n of `--sizes`.
+with pymunk (scenes/families.py: pile, rain, tumbler, smash, level, drum), at each n of `--sizes`.
 Backends are ranked on update + pairs (the broad phase itself); the report says per family which
 of our structured backends falls over 3x behind our fastest, how our fastest stands against the
 fastest engine, and where the ranking differs from the essay's motion. Writes results.csv,

@@ -12,6 +12,9 @@ Each family has a trait the essay's motion lacks (recommend names them; `TRAITS`
   block (Box2D's smash): one large fast object among resting ones.
 - `level`: a static board of pegs (80% of the objects) with balls falling through it, put back at
   the top once they leave the bottom: most objects static, the movers teleported.
+- `drum`: a round drum, under half full, turning fast enough that the balls it lifts cascade
+  down its free surface (a rotating-drum mixer): everything moves, a layer at speed over a bed
+  carried round with the wall.
 
 Frame 0 is taken after a warm-up (the pile has landed, rain is at its steady state); every
 recorded frame is one 1/60 s step of the simulation (two substeps). pymunk is deterministic for
@@ -35,19 +38,23 @@ from .families3d import layout as layout_3d
 from .recorded import Recording, fill_absent
 from .scene import Scene, check_box, shown
 
-FAMILIES: tuple[str, ...] = ("pile", "rain", "tumbler", "smash", "level")
+FAMILIES: tuple[str, ...] = ("pile", "rain", "tumbler", "smash", "level", "drum")
 TRAITS: dict[str, str] = {
     "pile": "resting contact (objects jitter in place under gravity)",
     "rain": "spawning and removal every few frames over a static ground",
     "tumbler": "everything in motion in a rotating container",
     "smash": "one large fast object through a resting block",
     "level": "most objects static, movers falling through them",
+    "drum": "everything in motion, a fast layer cascading over a bed turning with the wall",
 }
 DEFAULT_RADII = (4.0, 8.0)
 FIRST_FRAMES = 32  # recorded when the scene is made; more are recorded when a study asks for them
 STEP_DT, SUBSTEPS = 1.0 / 60.0, 2
 GRAVITY = 900.0  # units per s^2, with radii of a few units: pixels, as in a 2-D game
-VERSION = 1  # part of the cache's file names: a change of any family's recipe changes it
+VERSION = 2  # part of the cache's file names: a change of any family's recipe changes it
+# The drum turns at this many degrees a second, its wall a polygon of DRUM_SIDES segments, and its
+# balls fill about this share of it when at rest.
+DRUM_TURN_DEGREES, DRUM_SIDES, DRUM_FILL = 60.0, 72, 0.4
 # A group of 1/40 of the rain's slots every 4 frames, each drop removed after 100 to 160 frames
 # (Box2D's rain: a column every 8 steps, the oldest of 40 destroyed): about 80% of the slots alive.
 RAIN_GROUPS, RAIN_PERIOD, RAIN_LIFE = 40, 4, (100, 160)
@@ -178,6 +185,9 @@ def _layout(family: str, n: int, rng: np.random.Generator, radii: tuple[float, f
         cols = int(math.ceil(math.sqrt(1.5 * n)))
         width = cols * 2.0 * hi
         box = (-0.6 * width, -0.2 * width, 1.1 * width, 0.9 * width)
+    elif family == "drum":
+        half = _drum_radius(n, hi) + hi
+        box = (-half, -half, half, half)
     else:  # level
         spacing = 4.0 * hi
         cols = int(math.ceil(math.sqrt(int(LEVEL_STATIC_SHARE * n))))
@@ -362,4 +372,34 @@ def _level(n, rng, radii, frames):
     return {"positions": positions, "radii": r, "box": lay["box"]}
 
 
-RECIPES = {"pile": _pile, "rain": _rain, "tumbler": _tumbler, "smash": _smash, "level": _level}
+def _drum_radius(n: int, hi: float) -> float:
+    """The drum's inner radius: room for the n balls' starting lattice, which fills about
+    DRUM_FILL of it once they have fallen together."""
+    spacing = 2.05 * hi
+    return math.sqrt(n * spacing * spacing / (math.pi * DRUM_FILL)) + spacing
+
+
+def _drum(n, rng, radii, frames):
+    import pymunk
+
+    lay = _layout("drum", n, rng, radii)
+    r = lay["radii"]
+    big = _drum_radius(n, radii[1])
+    space = _space(GRAVITY)
+    wall = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+    wall.angular_velocity = math.radians(DRUM_TURN_DEGREES)
+    space.add(wall)
+    angles = np.linspace(0.0, 2.0 * math.pi, DRUM_SIDES + 1)
+    _walls(space, [(big * math.cos(a), big * math.sin(a)) for a in angles], body=wall)
+    spacing = 2.05 * radii[1]
+    side = int(2 * big / spacing)
+    grid = (np.stack(np.meshgrid(np.arange(side), np.arange(side)), axis=-1).reshape(-1, 2) + 0.5) * spacing - big
+    inside = grid[np.hypot(grid[:, 0], grid[:, 1]) < big - spacing]
+    start = inside[np.argsort(inside[:, 1], kind="stable")][:n]  # the lowest places first
+    start = start + rng.uniform(-0.05 * radii[1], 0.05 * radii[1], start.shape)
+    bodies = [_ball(space, x, y, rad) for (x, y), rad in zip(start, r)]
+    # Warmed up until the balls have fallen together and the drum has turned them a while.
+    return {"positions": _run(space, bodies, frames, 120, "drum"), "radii": r, "box": lay["box"]}
+
+
+RECIPES = {"pile": _pile, "rain": _rain, "tumbler": _tumbler, "smash": _smash, "level": _level, "drum": _drum}
