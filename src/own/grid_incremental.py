@@ -394,7 +394,7 @@ class IncrementalSquares(StaticsApart, CellLayout):
         """own.grid's search from now on, built on these positions."""
         if self._plain is None:
             self._plain = SquareGrid(p=self.params["p"], cell=self.params["cell"], specialise=self.params["specialise"])
-            self._plain.small_scene_n = 0  # the structure at every size, as this backend's
+            self._plain.small_scene_n = -1  # the structure at every size, none too (all static), as this backend's
         self._plain.reset(positions, self.radii)
         self._quiet = 0
 
