@@ -265,6 +265,12 @@ def test_sap_sweeps_in_strips_where_the_scene_is_dense_and_plain_where_it_is_spa
     assert sap.stats()["strips"] == 0
 
 
+def test_sap_refuses_a_skin_that_is_not_a_distance():
+    for skin in (-1.0, float("nan"), "wide"):
+        with pytest.raises(ValueError, match="own.sap: skin must be a distance >= 0"):
+            engines.create("own.sap", skin=skin)
+
+
 def test_sap_strips_give_up_on_a_box_that_spans_more_than_two_strips():
     # Strips half as tall as the boxes: the kernel says so rather than sweep a strip order that
     # could pair objects three strips apart.
@@ -565,14 +571,14 @@ def test_verlet_list_is_exact_under_its_rebuild_rule_across_stepped_frames(scene
             assert np.array_equal(np.sort(keys(got, n)), expected)
 
 
-@pytest.mark.parametrize("name", ["own.quadtree", "own.bvh"])
+@pytest.mark.parametrize("name", ["own.quadtree", "own.bvh", "own.sap", "own.sap_incremental", "own.sap_parallel"])
 @settings(max_examples=40)
 @given(scene=any_scene, steps=st.lists(st.sampled_from([0.0, 0.01, 0.3, 3.0, 40.0]), min_size=1, max_size=14),
        seed=st.integers(0, 2**16))
 def test_trees_are_exact_while_kept_under_their_skin_across_stepped_frames(name, scene, steps, seed):
-    """Steps within the trees' skin (the tree kept, the pairs of its grown boxes tested) and past it
-    (built again, the skin adapting; once it is zero, refitted until the leaves drift apart):
-    every frame's pairs are the box overlaps."""
+    """Steps within the trees' (and the sweeps') skin (the tree kept, the pairs of its grown boxes
+    tested) and past it (built again, the skin adapting; a tree at zero skin refitted until its
+    leaves drift apart): every frame's pairs are the box overlaps."""
     positions, radii = scene
     positions, radii = np.asarray(positions, dtype=float).reshape(-1, 2), np.asarray(radii, dtype=float)
     rng = np.random.default_rng(seed)
@@ -587,9 +593,10 @@ def test_trees_are_exact_while_kept_under_their_skin_across_stepped_frames(name,
         assert np.array_equal(np.sort(keys(tree.pairs(), n)), keys(brute_pairs(positions, radii), n))
 
 
-def test_trees_keep_their_structure_while_nothing_moves_past_the_skin():
+@pytest.mark.parametrize("name", ["own.bvh", "own.sap", "own.sap_incremental"])
+def test_trees_keep_their_structure_while_nothing_moves_past_the_skin(name):
     traj = simulate(generate("uniform", 2000, seed=4, speed=1.0), frames=6)
-    tree = engines.create("own.bvh")
+    tree = engines.create(name)
     tree.reset(traj.positions[0], traj.scene.radii)
     for f in range(1, traj.frames):
         tree.update(traj.positions[f])
