@@ -1,5 +1,5 @@
 """A skin that adapts to the motion: how far our structures that are kept over frames (the Verlet
-list, the trees and the pairs they found) let each object move before they are built again.
+list, the trees, the sweeps and the pairs they found) let each object move before they are built again.
 
 A structure built with a skin holds every pair whose boxes, each enlarged by half the skin, overlap;
 it is reused, exactly, while no object has moved more than skin / 2 since it was built. A wider skin
