@@ -403,10 +403,13 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         if self._adapts:
             kept = len(self._kept) if self._kept is not None else None
             self._skin = self._skins.next(self._since, kept, self._overlapping, self.n)
-        if self._skin != self._swept_skin:
-            self._start_sweep(positions)  # boxes grown by another skin: sorted afresh
-        else:
-            self._build(positions)
+        if self._skin != self._swept_skin and self._sweep3 is not None:
+            self._start_sweep(positions)  # the columns' sweep holds its radii: built anew for the new skin
+            return
+        if self._skin != self._swept_skin:  # 2D: the bounds come from the radii each frame, the order stays
+            self._swept_skin = self._skin
+            self._sweep_radii = self.radii + 0.5 * self._skin if self._skin > 0.0 else self.radii
+        self._build(positions)
 
     def _build(self, positions):
         """Sort for this frame's sweep of the boxes grown by half the skin, whose pairs are kept."""
