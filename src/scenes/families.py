@@ -51,7 +51,7 @@ DEFAULT_RADII = (4.0, 8.0)
 FIRST_FRAMES = 32  # recorded when the scene is made; more are recorded when a study asks for them
 STEP_DT, SUBSTEPS = 1.0 / 60.0, 2
 GRAVITY = 900.0  # units per s^2, with radii of a few units: pixels, as in a 2-D game
-VERSION = 2  # part of the cache's file names: a change of any family's recipe changes it
+VERSION = 1  # part of the cache's file names: a change of any family's recipe changes it
 # The drum turns at this many degrees a second, its wall a polygon of DRUM_SIDES segments, and its
 # balls fill about this share of it when at rest.
 DRUM_TURN_DEGREES, DRUM_SIDES, DRUM_FILL = 60.0, 72, 0.4
