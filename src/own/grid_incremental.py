@@ -22,8 +22,8 @@ import numba as nb
 import numpy as np
 
 from .common import PairCollector, centre_extents, emit, radius_of
-from .grid import (CellLayout, SquareGrid, cell_key, covered_cells, gather_centres, grid_layout, key_space, large_against_large,
-                   small_limit)
+from .grid import (CellLayout, SquareGrid, cell_key, covered_cells, gather_centres, grid_layout, key_space,
+                   large_against_large, small_limit)
 from .grid3d import CubesForSpheres
 from .statics import StaticsApart
 
@@ -394,7 +394,7 @@ class IncrementalSquares(StaticsApart, CellLayout):
         """own.grid's search from now on, built on these positions."""
         if self._plain is None:
             self._plain = SquareGrid(p=self.params["p"], cell=self.params["cell"], specialise=self.params["specialise"])
-            self._plain.small_scene_n = -1  # the structure at every size, none too (all static), as this backend's
+            self._plain.small_scene_n = -1  # a structure at every size, as this backend's (none: all static)
         self._plain.reset(positions, self.radii)
         self._quiet = 0
 
@@ -442,7 +442,6 @@ class IncrementalSquares(StaticsApart, CellLayout):
         forced = rebuilt and not (chosen or renew)
         if self._may_search_plain() and (forced or self._m > KEEP_MAX_CANDIDATES_PER_OBJECT * self.n):
             self._switch = True
-
 
     def _new_candidates(self, rows: int) -> None:
         """Room for this many candidate pairs, before the first rebuild."""

@@ -11,10 +11,10 @@ from scenes.scene import shown
 
 from .coherent import RepairSchedule
 from .common import PairCollector, emit, gather, insertion_sort
-from .skin import FILTER_KERNELS, STEP_KERNELS, SkinSchedule
 from .parallel import ChunkedPairCollector
 from .radix import radix_argsort, sortable_bits
 from .sap3d import Sweep3
+from .skin import FILTER_KERNELS, STEP_KERNELS, SkinSchedule
 from .small import SmallScenes
 from .statics import StaticsApart
 from .strips import strip_plan, strip_prepare, strip_sweep, strip_sweep_parallel
