@@ -37,7 +37,7 @@ import time
 import numpy as np
 
 import engines
-from engines.pairs import keys
+from interface.pairs import keys
 from own.bvh import morton_codes, morton_codes3
 from own.floor import FLOOR_KERNELS
 from own.parallel import threading_layer, threads

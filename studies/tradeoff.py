@@ -29,8 +29,17 @@ from scenes import Scene, generate
 from .lib.cli import Parser, command_line, in_dimension, matched_backends, run_cli, warn_unavailable
 from .lib.figures import backend_colour, new_figure, pareto_front
 from .lib.harness import Job
-from .lib.options import (add_backends_option, add_dim_option, add_output_options, add_quick_option,
-                          add_scene_file_option, add_trial_options, dim_of, file_scene, parse_checked)
+from .lib.options import (
+    add_backends_option,
+    add_dim_option,
+    add_output_options,
+    add_quick_option,
+    add_scene_file_option,
+    add_trial_options,
+    dim_of,
+    file_scene,
+    parse_checked,
+)
 from .lib.output import Output, docs_folder, read_meta, write_json
 from .lib.pool import Pool
 from .lib.results import RowWriter, read_rows, summarise
@@ -163,7 +172,7 @@ def figure(lines: pd.DataFrame, path: Path) -> Path:
             bottom.set_xticklabels([])
     bottom.set_xlabel("median time per frame, end to end (ms); colour: the backend (shades of its family's); "
                       "marker: the knob changed")
-    handles = [Line2D([], [], ls="", marker="o", color=engines.registry.FAMILIES[f].colour, label=f) for f in families]
+    handles = [Line2D([], [], ls="", marker="o", color=engines.FAMILIES[f].colour, label=f) for f in families]
     handles += [Line2D([], [], ls="", marker=knob_markers[k], color="0.3", label=k) for k in knob_markers]
     fig.legend(handles=handles, loc="upper center", ncol=min(len(handles), 10), fontsize=7, frameon=False)
     height = fig.get_figheight()

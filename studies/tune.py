@@ -23,21 +23,28 @@ import numpy as np
 import pandas as pd
 
 import engines
-from engines.knobs import frames_needed
+from interface.knobs import frames_needed
 from own.bvh import LinearBvh
 from own.grid import GRID_CELL_FACTORS, MAX_CELLS_PER_OBJECT
 from own.quadtree import Quadtree
-from own.skin import GROW_MARGIN, SHRINK_GAIN
-from own.verlet import DEFAULT_SKIN_DIAMETERS, LARGEST_SKIN_DIAMETERS, SKIN_FACTORS, TRIAL_FRAMES
 from own.sap import SPARSE_PAIRS_PER_OBJECT
+from own.skin import GROW_MARGIN, SHRINK_GAIN
 from own.tree import REFIT_DRIFT
+from own.verlet import DEFAULT_SKIN_DIAMETERS, LARGEST_SKIN_DIAMETERS, SKIN_FACTORS, TRIAL_FRAMES
 from scenes import FAMILIES as RECORDED_FAMILIES
 from scenes import Scene, generate
 
 from .lib.cli import CliError, Parser, command_line, in_dimension, matched_backends, run_cli, warn_unavailable
 from .lib.figures import new_figure, save
-from .lib.options import (add_backends_option, add_output_options, add_quick_option, add_scene_options,
-                          add_trial_options, parse_checked, scene_from_args)
+from .lib.options import (
+    add_backends_option,
+    add_output_options,
+    add_quick_option,
+    add_scene_options,
+    add_trial_options,
+    parse_checked,
+    scene_from_args,
+)
 from .lib.output import Output, read_meta, report_folder
 from .lib.pool import Pool
 from .lib.results import RowWriter, read_rows, stored_runs, summarise

@@ -7,7 +7,7 @@ import signal
 import tempfile
 from functools import cache
 
-from engines import registry
+from interface import registry
 from own.brute import Brute
 
 TEST_FAMILY = registry.Family("test", "library", "test-only backends", "tab:gray")

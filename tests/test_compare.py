@@ -12,8 +12,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from engines import registry
 from fakes import Crashes, register
+from interface import registry
 from own.brute import Brute
 from scenes import generate
 from scenes.motion import simulate

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import engines
-from engines.pairs import keys
+from interface.pairs import keys
 from own.brute import brute_pairs
 from own.compress import SLACK_ROWS
 from own.grid import grid_pairs

@@ -15,11 +15,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import pytest
+from test_engines import LIMITATIONS, UNRELIABLE
 
 import engines
-from engines.pairs import missing
+from interface.pairs import missing
 from own.reference import box_pairs, narrow_phase
-from test_engines import LIMITATIONS, UNRELIABLE
 
 TIME_LIMIT_S = 60.0  # a hang; every answer here takes well under a second
 RNG = np.random.default_rng(51)

@@ -22,7 +22,7 @@ import pytest
 from hypothesis import assume, given, settings
 
 import engines
-from engines.pairs import is_canonical, missing
+from interface.pairs import is_canonical, missing
 from own.reference import box_pairs, circle_pairs, narrow_phase
 from scenes import generate
 from scenes.families import family_scene
@@ -525,7 +525,7 @@ UNGUARDED_SECONDS = {"bullet.simple": 180}
 UNGUARDED = textwrap.dedent("""
     import sys, numpy as np
     import engines
-    from engines.base import NO_LIMITS
+    from interface.base import NO_LIMITS
     name, positions, radii = sys.argv[1], np.load(sys.argv[2]), np.load(sys.argv[3])
     cls = engines.backend_class(name)
     cls.limits = NO_LIMITS

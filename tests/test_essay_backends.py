@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 
 import engines
-from engines.pairs import is_canonical, keys
+from interface.pairs import is_canonical, keys
 from own.brute import brute_pairs
 from scenes import generate
 from strategies import generated_scenes, lattice_scenes

@@ -43,7 +43,7 @@ def test_every_family_package_is_pinned_in_pyproject_as_the_registry_says():
 
 
 def test_an_unavailable_backend_says_how_to_install_it(monkeypatch):
-    from engines import registry
+    from interface import registry
 
     monkeypatch.setitem(registry.BACKENDS, "chipmunk.missing", "engines.no_such_adapter:Nothing")
     with pytest.raises(ValueError, match=r"not available here \(ModuleNotFoundError.*install it with: pip install "

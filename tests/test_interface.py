@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import engines
-from engines.pairs import canonical, is_canonical
-from own.reference import BRUTE_FORCE_LIMIT, box_pairs, narrow_phase
+from interface.pairs import canonical, is_canonical
 from own.brute import brute_pairs
+from own.reference import BRUTE_FORCE_LIMIT, box_pairs, narrow_phase
 from scenes import generate
 
 OWN = ["own.brute", "own.sap", "own.grid", "own.grid_incremental", "own.quadtree", "own.bvh", "essay.sap", "essay.grid", "essay.quadtree"]

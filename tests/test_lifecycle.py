@@ -10,14 +10,13 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_engines import RELIABLE, make
 
 import engines
-from engines.pairs import is_canonical, keys, missing
+from interface.pairs import is_canonical, keys, missing
 from own.reference import box_pairs, narrow_phase
 from scenes.motion import simulate
 from scenes.recorded import recorded_scene
-
-from test_engines import RELIABLE, make
 from test_own_exact import EXACT, IDS
 
 OWN_AND_ESSAY = [n for n in engines.names() if n.split(".")[0] in ("own", "essay")]

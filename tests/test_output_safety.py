@@ -182,7 +182,7 @@ def test_error_texts_show_numbers_as_numbers():
     import numpy as np
 
     import engines
-    from engines.base import Limits
+    from interface.base import Limits
 
     problem = Limits(coordinate=1e15).problem(np.array([[1.0000001e15, 0.0]]), np.ones(1))
     assert "coordinates up to 1.0000001e+15, beyond its limit of 1e+15" in problem

@@ -8,10 +8,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import engines
-from engines.pairs import is_canonical, keys
+from interface.pairs import is_canonical, keys
 from own import grid_incremental, grid_parallel
-from own.parallel import chunk_count
 from own.brute import brute_pairs
+from own.parallel import chunk_count
 from own.small import SmallScenes
 from own.tree import REFIT_RETRY
 from scenes import generate

@@ -7,10 +7,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from interface.checks import check_positions
 from scenes import DISTRIBUTIONS, ESSAY_BOX, ESSAY_COVERAGE, Scene, generate
 from scenes.io import SceneFileError, load_scene, save_scene
 from scenes.motion import kinetic_energy, momentum, simulate
-from scenes.scene import check_positions
 from strategies import BAD_SCENE_FILES
 
 
@@ -107,8 +107,8 @@ def test_each_frame_records_its_exact_pairs():
 
 
 def test_renumbered_trajectory_is_the_same_motion_with_every_pair_mapped():
-    from own.reference import narrow_phase
     from own.brute import brute_pairs
+    from own.reference import narrow_phase
 
     traj = simulate(generate("clusters", 300, seed=9, speed=800.0), 4)
     order = np.random.default_rng(1).permutation(300)

@@ -9,7 +9,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import engines
-from engines.pairs import is_canonical, keys
+from interface.pairs import is_canonical, keys
 from own.brute import brute_pairs
 from own.small import SMALL_SCENE_N, SmallScenes, small_sweep
 from scenes import generate

@@ -11,14 +11,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import engines
-from engines.pairs import is_canonical, keys
+from interface.checks import check_positions
+from interface.pairs import is_canonical, keys
 from own import grid_incremental3d
 from own.brute import brute_pairs
 from own.grid3d import grid3_box_pairs
 from own.reference import BRUTE_FORCE_LIMIT, box_pairs, circle_pairs, narrow_phase
 from scenes.generate import at_essay_density
 from scenes.motion import simulate
-from scenes.scene import check_positions
 from strategies import sphere_scenes
 
 

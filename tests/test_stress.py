@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 import engines
-from engines.pairs import keys
+from interface.pairs import keys
 from own.brute import brute_pairs
 from scenes.motion import simulate
 from scenes.stress import STRESS_SCENES, stress_scenes

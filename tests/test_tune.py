@@ -10,14 +10,14 @@ import pandas as pd
 import pytest
 
 import engines
-from engines.knobs import Knob, frames_needed
 from fakes import Lossy, register
+from interface.knobs import Knob, frames_needed
 from scenes import generate
 from studies import tune
-from studies.tune import describe_result
 from studies.lib.runner import Runner
 from studies.lib.trials import Trial, run_trial
 from studies.lib.tuning import Sweep, tune_backend
+from studies.tune import describe_result
 
 
 def trial(ms, low=None, high=None, missed=0):

@@ -19,8 +19,8 @@ import Box2D
 import numpy as np
 import pyb2d3
 
-from .base import EMPTY_PAIRS, FLOAT32_BREAKS, BroadPhase, Limits
-from .pairs import canonical
+from interface.base import EMPTY_PAIRS, FLOAT32_BREAKS, BroadPhase, Limits
+from interface.pairs import canonical
 
 FRAME_DT = 1.0 / 60.0
 FLOAT32_MAX = float(np.finfo(np.float32).max)

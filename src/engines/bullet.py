@@ -14,15 +14,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .quiet import native_output_silenced
-
-
+from interface.quiet import native_output_silenced
 
 with native_output_silenced():  # pybullet prints its build time from C on import
     import pybullet
 
-from .base import BroadPhase, Limits, in_3d
-from .pairs import canonical
+from interface.base import BroadPhase, Limits, in_3d
+from interface.pairs import canonical
 
 
 class _Bullet(BroadPhase):

@@ -16,11 +16,10 @@ import numpy as np
 import pymunk
 import pymunk.batch as batch
 
-from scenes.scene import shown
-
-from .base import BroadPhase, Limits, hash_cells_problem
-from .knobs import HASH_CELL_FACTORS, Knob, mean_diameter, sizes
-from .pairs import canonical
+from interface.base import BroadPhase, Limits, hash_cells_problem
+from interface.checks import shown
+from interface.knobs import HASH_CELL_FACTORS, Knob, mean_diameter, sizes
+from interface.pairs import canonical
 
 SHAPES = ("box", "circle")
 # Chipmunk's hash walks every cell an object's box covers and floors coordinates / cell size into

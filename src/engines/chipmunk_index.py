@@ -32,7 +32,8 @@ import numpy as np
 import pymunk._chipmunk
 from numba import types
 
-from .base import BroadPhase
+from interface.base import BroadPhase
+
 from .chipmunk import HASH_SWEEPS, ChipmunkTree, HashCellGuard
 
 CDEF = """

@@ -13,9 +13,9 @@ from __future__ import annotations
 import coal
 import numpy as np
 
-from .base import BroadPhase, Limits, hash_cells_problem, in_3d
-from .knobs import HASH_CELL_FACTORS, Knob, mean_diameter, sizes
-from .pairs import canonical
+from interface.base import BroadPhase, Limits, hash_cells_problem, in_3d
+from interface.knobs import HASH_CELL_FACTORS, Knob, mean_diameter, sizes
+from interface.pairs import canonical
 
 MAX_CONTACTS = 1 << 30
 # Its sphere test sums the radii: two radii of 1e308 sum to infinity and their contact was lost

@@ -19,10 +19,9 @@ import math
 
 import numpy as np
 
+from interface.base import EMPTY_PAIRS, BroadPhase, in_3d
 from own.common import boxes
 from own.reference import box_pairs
-
-from .base import EMPTY_PAIRS, BroadPhase, in_3d
 
 # The cutoff asked for is 2 r_max widened by a millionth: freud, matscipy and vesin keep pairs
 # strictly closer than the cutoff, and two circles of radius r_max that touch are exactly 2 r_max

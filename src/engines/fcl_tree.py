@@ -18,8 +18,8 @@ from __future__ import annotations
 import fcl
 import numpy as np
 
-from .base import BroadPhase, Limits
-from .pairs import canonical
+from interface.base import BroadPhase, Limits
+from interface.pairs import canonical
 
 TINY_RADIUS = 1e-300
 INDEX_STEP = 5e-324  # the smallest subnormal double

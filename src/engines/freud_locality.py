@@ -14,7 +14,8 @@ from __future__ import annotations
 import freud
 import numpy as np
 
-from .base import FLOAT32_BREAKS
+from interface.base import FLOAT32_BREAKS
+
 from .cutoff import CUTOFF_PAD, HELD, CutoffSearch, image_free_side, in_3d
 
 # freud runs its queries on every core through TBB unless told otherwise; the study sets backends

@@ -22,7 +22,8 @@ import warnings
 import numpy as np
 from MDAnalysis.lib.nsgrid import FastNS
 
-from .base import FLOAT32_BREAKS, FLOAT32_LIMITS
+from interface.base import FLOAT32_BREAKS, FLOAT32_LIMITS
+
 from .cutoff import HELD, CutoffSearch, in_3d
 
 

@@ -30,7 +30,7 @@ import warnings
 import mujoco
 import numpy as np
 
-from .base import EMPTY_PAIRS, BroadPhase, Limits, in_3d
+from interface.base import EMPTY_PAIRS, BroadPhase, Limits, in_3d
 
 MAX_BODIES = 65533  # mjModel counts bodies (the world included) in 16 bits, less a few reserved ids
 ARENA_BYTES_PER_BODY_PAIR = 4.1  # the broad phase's scratch, in bytes per n^2 (measured, above)

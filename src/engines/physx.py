@@ -25,9 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .base import EMPTY_PAIRS, FLOAT32_BREAKS, BroadPhase, Limits, in_3d
-from .quiet import native_output_silenced
-from .pairs import canonical
+from interface.base import EMPTY_PAIRS, FLOAT32_BREAKS, BroadPhase, Limits, in_3d
+from interface.pairs import canonical
+from interface.quiet import native_output_silenced
 
 FRAME_DT = 1.0 / 60.0
 PREFIX = "/World/s"  # moving object k is the prim /World/s<k>

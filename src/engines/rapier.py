@@ -20,10 +20,9 @@ from dataclasses import replace
 import numpy as np
 import rapier3d
 
-from scenes.scene import shown
-
-from .base import EMPTY_PAIRS, FLOAT32_BREAKS, FLOAT32_LIMITS, BroadPhase, in_3d
-from .knobs import Knob, fixed
+from interface.base import EMPTY_PAIRS, FLOAT32_BREAKS, FLOAT32_LIMITS, BroadPhase, in_3d
+from interface.checks import shown
+from interface.knobs import Knob, fixed
 
 
 class RapierBvh(BroadPhase):

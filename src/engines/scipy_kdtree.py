@@ -9,7 +9,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .base import EMPTY_PAIRS, BroadPhase, Limits
+from interface.base import EMPTY_PAIRS, BroadPhase, Limits
+
 from .cutoff import box_filtered
 
 

@@ -16,8 +16,8 @@ import time
 import numpy as np
 import warp as wp
 
-from .base import EMPTY_PAIRS, FLOAT32_BREAKS, BroadPhase
-from .quiet import native_output_silenced
+from interface.base import EMPTY_PAIRS, FLOAT32_BREAKS, BroadPhase
+from interface.quiet import native_output_silenced
 
 wp.config.log_level = wp.LOG_WARNING  # not its module-load timings on every first launch
 GRID_DIM = 128  # hash grid dimensions (cells are hashed into GRID_DIM^2 buckets, GRID_DIM^3 for spheres)

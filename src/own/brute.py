@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from engines.base import BroadPhase, PairArray
+from interface.base import BroadPhase, PairArray
 
 from .common import boxes
 from .statics import StaticsApart

@@ -21,14 +21,15 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from engines.knobs import Knob, fixed
+from interface.knobs import Knob, fixed
 
 from .coherent import box_frame
 from .morton import interleave, interleave3
 from .small import SmallScenes
 from .statics import StaticsApart
-from .tree import END, START, MortonTree, add_children, build_tree, new_table, split_at_highest_bit
+from .tree import MortonTree, add_children, build_tree, new_table, split_at_highest_bit
 from .tree3d import build_tree3, cube_frame
+from .tree_search import END, START
 
 MORTON_BITS = 16  # per axis: 2^16 lattice steps over the lattice square
 

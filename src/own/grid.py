@@ -26,9 +26,9 @@ import math
 import numba as nb
 import numpy as np
 
-from engines.base import BroadPhase
-from engines.knobs import Knob, mean_diameter, sizes
-from scenes.scene import shown
+from interface.base import BroadPhase
+from interface.checks import shown
+from interface.knobs import Knob, mean_diameter, sizes
 
 from .common import PairCollector, centre_extents, emit, one_radius, radius_of
 from .compress import NATIVE, SLACK_ROWS, scan_compressed

@@ -20,8 +20,17 @@ import numpy as np
 
 from .common import PairCollector, one_radius, radius_of
 from .grid3d import NX, NY, NZ, SIDE, cube_key, cube_keys, cube_space, grid3_layout
-from .grid_incremental import (LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT, _add,
-                               drop_moved, link_runs, move, new_state, unpack)
+from .kept_lists import (
+    LAYOUT_SLACK_CELLS,
+    REBUILD_MOVERS_DIVISOR,
+    RENEW_AFTER_MOVES_PER_OBJECT,
+    add_candidate,
+    drop_moved,
+    link_runs,
+    move,
+    new_state,
+    unpack,
+)
 
 
 def cube_heads_length(layout: np.ndarray) -> int:
@@ -99,7 +108,7 @@ def add_neighbours3(state, head, moved, movers, k, w, layer, cand, m):
                     b = head[c + dz + dy + dx]
                     while b >= 0:
                         if b != a and (moved[b] == 0 or b > a):
-                            m = _add(cand, m, a, b)
+                            m = add_candidate(cand, m, a, b)
                         b = nxt[b]
     return m
 

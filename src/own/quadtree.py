@@ -30,13 +30,14 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from engines.knobs import Knob, fixed
+from interface.knobs import Knob, fixed
 
 from .morton import bit_length, interleave, interleave3
 from .small import SmallScenes
 from .statics import StaticsApart
-from .tree import END, START, MortonTree, add_children, build_tree, new_table, split_at_highest_bit
+from .tree import MortonTree, add_children, build_tree, new_table, split_at_highest_bit
 from .tree3d import build_tree3
+from .tree_search import END, START
 
 # Keys are (Morton code of the cell, padded to depth D) << LEVEL_BITS | depth: 2 D + 5 bits.
 LEVEL_BITS = 5

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from engines.base import PairArray
+from interface.base import PairArray
 
 # Above this many objects brute force is too slow; the exact grid (own.grid in 2D, own/grid3d.py in
 # 3D: each tested equal to brute force on random and adversarial scenes) takes over.

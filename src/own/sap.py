@@ -5,9 +5,9 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from engines.base import BroadPhase
-from engines.knobs import Knob, fixed
-from scenes.scene import shown
+from interface.base import BroadPhase
+from interface.checks import shown
+from interface.knobs import Knob, fixed
 
 from .coherent import RepairSchedule
 from .common import PairCollector, emit, gather, insertion_sort

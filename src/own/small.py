@@ -16,7 +16,7 @@ from typing import Callable, ClassVar
 import numba as nb
 import numpy as np
 
-from scenes.scene import check_positions, check_radii
+from interface.checks import check_positions, check_radii
 
 # At or below this many objects, no structure. Per frame (update + pairs) against our fastest
 # structure, the incremental grid: at the essay's density 2.8 against 6.1 us at n = 64, and still

@@ -8,8 +8,8 @@ detection). The cost: more candidates, and a rebuild every frame since the radii
 
 from __future__ import annotations
 
-from engines.base import BroadPhase
-from engines.registry import backend_class
+from interface.base import BroadPhase
+from interface.registry import backend_class
 
 from .common import swept_circles
 from .statics import StaticsApart

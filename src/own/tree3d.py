@@ -16,7 +16,7 @@ from numba.cpython.unsafe.numbers import trailing_zeros
 
 from .coherent import FRAME_SLACK, resort
 from .common import emit
-from .tree import CHILD, END, NO_CHILD, START, search_tree
+from .tree_search import CHILD, END, NO_CHILD, START, search_tree
 
 ROWS = 6  # box rows: lx, hx, ly, hy, lz, hz
 

@@ -20,9 +20,9 @@ import math
 
 import numpy as np
 
-from engines.base import BroadPhase
-from engines.knobs import Knob, fixed, mean_diameter, sizes
-from scenes.scene import shown
+from interface.base import BroadPhase
+from interface.checks import shown
+from interface.knobs import Knob, fixed, mean_diameter, sizes
 
 from .common import PairCollector
 from .grid import UniformGrid
@@ -33,7 +33,7 @@ PRECISIONS = ("float64", "float32")
 SKIN_FACTORS = (0.05, 0.1, 0.25, 0.5, 1.0, 2.0)  # the skin, in mean diameters, for a sweep
 # The default skin, in mean diameters: where it starts, and the most it grows to.
 DEFAULT_SKIN_DIAMETERS, LARGEST_SKIN_DIAMETERS = 0.25, 1.0
-# Every trial that tunes the skin spans this many frames (engines.knobs.Knob.trial_frames): the
+# Every trial that tunes the skin spans this many frames (interface.knobs.Knob.trial_frames): the
 # sweep's larger skins (a diameter lives about 30 frames of the essay's motion at r = 10) must pay
 # for a rebuild inside it, as the default's shorter-lived lists do.
 TRIAL_FRAMES = 40

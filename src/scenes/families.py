@@ -33,10 +33,12 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from interface.checks import shown
+
 from .families3d import FAMILIES_3D, RECIPES_3D
 from .families3d import layout as layout_3d
 from .recorded import Recording, fill_absent
-from .scene import Scene, check_box, shown
+from .scene import Scene, check_box
 
 FAMILIES: tuple[str, ...] = ("pile", "rain", "tumbler", "smash", "level", "drum")
 TRAITS: dict[str, str] = {

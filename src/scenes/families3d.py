@@ -18,7 +18,7 @@ import math
 import numpy as np
 from tqdm import tqdm
 
-from engines.quiet import native_output_silenced
+from interface.quiet import native_output_silenced
 
 from .recorded import fill_absent
 

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from interface.checks import shown
+
 from .families import FAMILIES, family_scene
-from .scene import DIMS, ESSAY_BOX, Scene, box_extent, check_box, shown
+from .scene import DIMS, ESSAY_BOX, Scene, box_extent, check_box
 
 ESSAY_SPEED = 10.0  # px per second, random direction
 ESSAY_RADIUS = 10.0

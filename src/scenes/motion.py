@@ -20,10 +20,11 @@ import numba as nb
 import numpy as np
 from tqdm import tqdm
 
+from interface.checks import shown
 from own.reference import box_pairs, narrow_phase
 
 from .costs import SAMPLE, costs
-from .scene import Scene, shown
+from .scene import Scene
 
 FRAME_DT = 1.0 / 60.0  # seconds per frame: speeds are in units per second, as in the essay
 

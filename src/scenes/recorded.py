@@ -25,7 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .scene import DIMS, Scene, check_box, check_mask, check_radii
+from interface.checks import check_mask, check_radii
+
+from .scene import DIMS, Scene, check_box
 
 MIN_FRAMES = 2  # the untimed warm-up frame and one timed frame
 

@@ -13,7 +13,7 @@ import numpy as np
 from matplotlib.collections import EllipseCollection, LineCollection
 from matplotlib.lines import Line2D
 
-from engines.pairs import keys
+from interface.pairs import keys
 
 from .figures import new_figure as blank_figure
 

@@ -16,8 +16,8 @@ import gc
 import hashlib
 import json
 import multiprocessing as mp
-import resource
 import os
+import resource
 import shutil
 import signal
 import sys
@@ -32,13 +32,12 @@ from typing import Any, Callable
 import numpy as np
 
 import engines
-from engines.pairs import is_canonical, keys
+from interface.pairs import is_canonical, keys
 from own.reference import narrow_phase
 from scenes import Scene
 from scenes.motion import Trajectory
 
 from .compiling import CompileClock, sample_of, warm_up
-
 
 SETUP_BUDGETS = 100.0  # the setup limit in budgets per frame
 SETUP_FLOOR_S = 30.0

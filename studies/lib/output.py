@@ -20,7 +20,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from engines.registry import FAMILIES
+from interface.registry import FAMILIES
 
 from . import cli
 from .cli import CliError

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import engines
-from engines.knobs import Knob
+from interface.knobs import Knob
 from scenes import Scene
 
 from .trials import Trial

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-from engines.knobs import Knob, fixed
+from interface.knobs import Knob, fixed
 
 from .particle import EssayBroadPhase, Particle, ordered
 

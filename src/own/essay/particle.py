@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from engines.base import EMPTY_PAIRS, BroadPhase
+from interface.base import EMPTY_PAIRS, BroadPhase
 
 
 class Particle:

@@ -12,7 +12,7 @@ particles are counted (`inserted` in the stats).
 
 from __future__ import annotations
 
-from engines.knobs import Knob, fixed
+from interface.knobs import Knob, fixed
 
 from .particle import EssayBroadPhase, Particle, ordered
 

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Literal
 import numpy as np
 import numpy.typing as npt
 
-from scenes.scene import check_mask, check_positions, check_radii, first_moved, shown
+from .checks import check_mask, check_positions, check_radii, first_moved, shown
 
 if TYPE_CHECKING:
     from .knobs import Knob

@@ -8,11 +8,19 @@ factors fits any scene's scale.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, Protocol
 
 import numpy as np
 
-from scenes import Scene
+
+class Scene(Protocol):
+    """What a knob reads of a scene (scenes.Scene has it): the floor below the scenes names only this."""
+
+    positions: np.ndarray
+    radii: np.ndarray
+
+    @property
+    def n(self) -> int: ...
 
 
 @dataclass(frozen=True)

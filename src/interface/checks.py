@@ -1,0 +1,108 @@
+"""The checks at the interface's boundary: every array a caller hands in (positions, radii,
+masks) becomes a contiguous float64 or bool array here, or a ValueError naming the problem; and
+the per-frame check that statics stay where they were."""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+
+
+def shown(value: object) -> str:
+    """A value as an error message shows it: numpy scalars as plain numbers (numpy 2's repr
+    would print np.float64(-1.0)), everything else as repr."""
+    return repr(value.item()) if isinstance(value, np.generic) else repr(value)
+
+
+def real_array(values: object, what: str) -> np.ndarray:
+    """`values` as a float64 array; complex, boolean and text values are refused (numpy would drop
+    an imaginary part with a warning, or read True as 1), as is anything that is not a number."""
+    arr = np.asarray(values)
+    if arr.dtype == np.float64:
+        return arr
+    if arr.dtype.kind not in "fiuO":
+        raise ValueError(f"{what} must be real numbers, got {arr.dtype} values")
+    try:
+        return arr.astype(np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be real numbers, got values such as {shown(arr.ravel()[0])}") from None
+
+
+def check_positions(positions: object, n: int | None = None, what: str = "positions",
+                    dims: tuple[int, ...] = (2,)) -> FloatArray:
+    """Return `positions` as a C-contiguous (n, d) float64 array, d one of `dims` (2: circles in a
+    plane, 3: spheres), or raise ValueError naming the problem."""
+    arr = real_array(positions, what)
+    if arr.ndim != 2 or arr.shape[1] not in dims:
+        shapes = " or ".join(f"(n, {d})" for d in dims)
+        raise ValueError(f"{what} must have shape {shapes}, got {arr.shape}")
+    if n is not None and arr.shape[0] != n:
+        raise ValueError(f"{what} has {arr.shape[0]} rows but the scene has {n} objects")
+    arr = np.ascontiguousarray(arr)
+    # The sum is finite whenever every value is, unless the values are huge enough to overflow
+    # it (past 1e308 / n): only then is each value checked.
+    if not math.isfinite(_sum(arr)) and not np.isfinite(arr).all():
+        row = int(np.flatnonzero(~np.isfinite(arr).all(axis=1))[0])
+        raise ValueError(f"{what} row {row} is not finite: {arr[row].tolist()} (NaN or infinite coordinates)")
+    return arr
+
+
+@nb.njit(cache=True, fastmath={"reassoc"})
+def _sum(values: FloatArray) -> float:
+    """Sum of a contiguous (n, d) array in any order, so that the compiler vectorises it; NaN and
+    infinities still propagate (no fast-math flag assumes them away). Every frame's positions pass
+    through here: at n = 2048 it takes 0.5 us, against 0.8 for a dot product and 2.1 for
+    ndarray.sum() (and the array is taken as it is: reshaping it first cost 0.17 us more)."""
+    flat = values.reshape(values.size)  # a view: the array is contiguous
+    total = 0.0
+    for i in range(flat.shape[0]):
+        total += flat[i]
+    return total
+
+
+@nb.njit(cache=True)
+def first_moved(positions: FloatArray, ids: np.ndarray, kept: FloatArray, alive: np.ndarray) -> int:
+    """The first of `ids` alive now (`alive`, empty: all) whose position differs from `kept`
+    (its row in `kept`), or -1: the check that statics stay where they were, every frame (20 us
+    for 50,000 statics)."""
+    everyone = alive.shape[0] == 0
+    for a in range(ids.shape[0]):
+        i = ids[a]
+        if not everyone and not alive[i]:
+            continue
+        for d in range(positions.shape[1]):
+            if positions[i, d] != kept[a, d]:
+                return a
+    return -1
+
+
+def check_radii(radii: object, n: int) -> FloatArray:
+    """Return `radii` as a contiguous (n,) float64 array of finite non-negative values, or raise ValueError."""
+    arr = real_array(radii, "radii")
+    if arr.ndim != 1 or arr.shape[0] != n:
+        raise ValueError(f"radii must have shape ({n},) to match the positions, got {arr.shape}")
+    bad = ~np.isfinite(arr) | (arr < 0)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        problem = "negative" if arr[i] < 0 else "not finite"
+        raise ValueError(f"radius {i} is {problem}: {shown(arr[i])}")
+    return np.ascontiguousarray(arr)
+
+
+def check_mask(mask: object, shape: tuple[int, ...], what: str) -> np.ndarray | None:
+    """`mask` as a contiguous bool array of `shape` (None stays None), or a ValueError naming the problem."""
+    if mask is None:
+        return None
+    arr = np.asarray(mask)
+    if arr.shape != shape:
+        raise ValueError(f"{what} must have shape {shape}, one flag per object, got {arr.shape}")
+    if arr.dtype != np.bool_:
+        if arr.dtype.kind not in "iu" or ((arr != 0) & (arr != 1)).any():
+            raise ValueError(f"{what} must be booleans (or 0 and 1), got {arr.dtype} values")
+        arr = arr.astype(np.bool_)
+    return np.ascontiguousarray(arr)
