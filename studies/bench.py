@@ -59,12 +59,6 @@ TARGETS_MS = {
 SMALL = (4, 16, 64)
 # Clustered scenes are bound by their output: the target is a multiple of the floor.
 CLUSTERED_FLOOR_MULTIPLE = {131072: 2.0}
-# Each family shown by its best single-thread variant; all pairs only where n is small.
-VARIANTS = {"own.grid": ["own.grid", "own.grid_incremental"], "own.sap": ["own.sap", "own.sap_incremental"],
-            "own.quadtree": ["own.quadtree"], "own.bvh": ["own.bvh"], "own.verlet": ["own.verlet"],
-            "own.brute": ["own.brute"]}
-# Measured against the both-cores target, and labelled apart: they use every core.
-PARALLEL = {"own.grid": ["own.grid_parallel"], "own.sap": ["own.sap_parallel"]}
 # Passes over the frames in the tight loop: at least this many, and more until --seconds have
 # passed (thousands at n = 2048). The fastest pass's median counts: other programs on a shared
 # machine only ever add time, and they come and go. On a shared 2-core VM most passes took 1.6x
@@ -76,16 +70,6 @@ SECONDS = 2.0
 # one size is not run at the next).
 SPHERE_SIZES = (2048, 131072, 1048576)
 RIVAL_BUDGET_S, RIVAL_TIMEOUT_S = 5.0, 150.0
-# Our backends that keep a sorted order between frames: (parameters that sort from scratch every
-# frame, parameters that keep last frame's order and repair it).
-COHERENCE = {
-    "own.grid": ({"coherent": False}, {"coherent": True}),
-    "own.sap": ({"incremental": False, "skin": 0}, {"incremental": True}),  # no skin: every frame sorted afresh
-    "own.quadtree": ({"coherent": False}, {"coherent": True}),
-    "own.bvh": ({"coherent": False}, {"coherent": True}),
-}
-
-
 def tight_loop(backend: str, traj: Trajectory, seconds: float, **params) -> tuple[float, float, list[dict]]:
     """Median ms of update + pairs over frames 1.. called back to back, in the fastest pass and
     in the median pass (passes: MIN_PASSES, and more until `seconds` have passed), after checking
@@ -172,10 +156,22 @@ def ms_without(backend: str, traj: Trajectory, seconds: float, used: bool, **par
     return f"{tight_loop(backend, traj, seconds, **params)[0]:.4f}" if used else "-"
 
 
-def variants_in(groups: dict[str, list[str]], dim: int) -> dict[str, list[str]]:
-    """The backends of each group that work in `dim` dimensions (groups left empty dropped)."""
-    kept = {family: [v for v in variants if engines.works_in(v, dim)] for family, variants in groups.items()}
-    return {family: variants for family, variants in kept.items() if variants}
+def bench_rows(dim: int, every_core: bool) -> dict[str, list[str]]:
+    """Our backends by the row bench shows them in (their registered `bench_row`), those that work
+    in `dim` dimensions: on one thread (each row shown by its fastest; all pairs only where n is
+    small), or on every core (measured against the both-cores target, and labelled apart)."""
+    rows: dict[str, list[str]] = {}
+    for name in engines.with_role("bench_row"):
+        if engines.uses_every_core(name) == every_core and engines.works_in(name, dim):
+            rows.setdefault(engines.roles(name).bench_row, []).append(name)
+    return rows
+
+
+def coherence_settings() -> dict[str, tuple[dict, dict]]:
+    """Our backends that keep a sorted order between frames (their registered `coherence`):
+    (parameters that sort from scratch every frame, parameters that keep last frame's order and
+    repair it)."""
+    return {name: engines.roles(name).coherence for name in engines.with_role("coherence")}
 
 
 def print_targets(trajectories, seconds: float, table: "Table") -> None:
@@ -193,12 +189,12 @@ def print_targets(trajectories, seconds: float, table: "Table") -> None:
         pairs = float(np.median([len(p) for p in traj.box_pairs[1:]]))
         in_space = traj.renumbered(spatial_order(traj.positions[0]))
         dim = traj.scene.dim
-        variants = variants_in(VARIANTS, dim)
+        variants = bench_rows(dim, every_core=False)
         families = [f for f in variants if f != "own.brute" or n <= max(SMALL)]
         rows = [(family, variants[family], 1) for family in families]
         one, both, what = target_of(n, dist, floor) if dim == 2 else (None, None, "")
         if both is not None or (dim == 3 and n > max(SMALL)):  # spheres: no targets, every core measured anyway
-            rows += [(family, group, threads()) for family, group in variants_in(PARALLEL, dim).items()]
+            rows += [(family, group, threads()) for family, group in bench_rows(dim, every_core=True).items()]
         best = {1: (float("inf"), ""), threads(): (float("inf"), "")}
         for family, variants, used in rows:
             measured = {v: tight_loop(v, traj, seconds) for v in variants}
@@ -309,7 +305,7 @@ def rival_verdicts(n: int, measured: dict[str, dict]) -> list[str]:
 
 
 def print_coherence(trajectories, seconds: float, table: "Table") -> None:
-    """Each of COHERENCE's backends from scratch and coherent, side by side in one run, with the
+    """Each backend of coherence_settings() from scratch and coherent, side by side in one run, with the
     repair's work: frames whose structure was kept unsorted (the sweep and the trees, under their skin), frames
     it repaired (the others it sorted afresh, as -1 swaps say), the median rows or entries its
     insertion sort moved in those, and for the grid the objects that changed cell."""
@@ -317,7 +313,7 @@ def print_coherence(trajectories, seconds: float, table: "Table") -> None:
           f"{'kept frames':>12} {'repaired frames':>16} {'moved by repair':>16} {'changed cell':>13}")
     for traj in trajectories:
         n, frames = traj.scene.n, traj.frames - 1
-        for backend, (scratch, coherent) in COHERENCE.items():
+        for backend, (scratch, coherent) in coherence_settings().items():
             scratch_ms, _, _ = tight_loop(backend, traj, seconds, **scratch)
             coherent_ms, _, counters = tight_loop(backend, traj, seconds, **coherent)
             kept = sum(c.get("reused", 0) for c in counters)

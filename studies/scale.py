@@ -280,7 +280,7 @@ def report(medians: pd.DataFrame, exponents: dict, stopped: dict, meta: dict, fo
     lines += ["", "## Our fastest backend against the fastest engine", "",
               "At each n where both ran (engines are "
               + ", ".join(f.name for f in engines.FAMILIES.values() if f.kind == "engine") + "), ours on one thread "
-              "as the engines run: " + ", ".join(engines.registry.EVERY_CORE) + ", on every core, are in the table "
+              "as the engines run: " + ", ".join(engines.with_role("every_core")) + ", on every core, are in the table "
               "above.", ""]
     if versus.empty:
         lines.append("No n where one of ours and an engine both ran.")

@@ -33,8 +33,6 @@ from .lib.runner import Runner
 
 ESSAY_MOTION = "uniform"  # the essay's motion, at the essay's density
 # The structured backends of ours that must stay within WITHIN of our fastest on every family.
-STRUCTURED = ("own.grid", "own.grid_incremental", "own.sap", "own.sap_incremental", "own.quadtree", "own.bvh",
-              "own.verlet")
 WITHIN = 3.0
 
 
@@ -139,9 +137,10 @@ def verdict(table: pd.DataFrame) -> dict:
     rivals = [b for b in ok.index if engines.of_kind(b, "engine")]
     best = min(ours, key=lambda b: ok.loc[b, "broad_ms"]) if ours else None
     engine = min(rivals, key=lambda b: ok.loc[b, "broad_ms"]) if rivals else None
-    slow = {b: ok.loc[b, "broad_ms"] / ok.loc[best, "broad_ms"] for b in STRUCTURED
+    structured = engines.with_role("structured")
+    slow = {b: ok.loc[b, "broad_ms"] / ok.loc[best, "broad_ms"] for b in structured
             if best and b in ok.index and ok.loc[b, "broad_ms"] > WITHIN * ok.loc[best, "broad_ms"]}
-    failed = [b for b in STRUCTURED if b in table.index and b not in ok.index]
+    failed = [b for b in structured if b in table.index and b not in ok.index]
     missed = [b for b in ours if ok.loc[b, "missed_total"] > 0]
     return {"best": best, "engine": engine, "ratio": (ok.loc[engine, "broad_ms"] / ok.loc[best, "broad_ms"])
             if best and engine else None, "slow": slow, "failed": failed, "missed": missed}

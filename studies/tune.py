@@ -69,7 +69,6 @@ FAMILY_SIZES = (1024, 8192)
 QUICK_FAMILIES, QUICK_FAMILY_SIZES = ("uniform r=10", "mixed r=1..100", "pile r=4..8", "level r=4..8"), (1024,)
 # Our structured backends, each with the knobs that keep it exact (own.verlet's `every`,
 # `precision` and `fat` trade misses for speed: that is tradeoff's study, not a default rule's).
-OWN = ["own.grid", "own.grid_incremental", "own.sap", "own.sap_incremental", "own.quadtree", "own.bvh", "own.verlet"]
 EXACT_KNOBS = {"own.verlet": ("skin",)}
 MAX_DEFAULT_LOSS = 0.3  # a default rule is within 1.3x of the tuned optimum on every family
 # Knobs swept in sizes of the scene's own (cells from the default cell, skins from the mean
@@ -194,7 +193,7 @@ def families_report(runner: Runner, out: Path, report_dir: Path, args) -> None:
         for n in QUICK_FAMILY_SIZES if args.quick else FAMILY_SIZES:
             scene = generate(n=n, seed=args.seed, speed=args.speed, **kwargs)
             print(f"{family}, n={n}:", flush=True)
-            for t in run_tune(runner, scene, OWN, args, exact_only=True):
+            for t in run_tune(runner, scene, engines.with_role("tuned"), args, exact_only=True):
                 rows.append({"family": family, "n": n, "backend": t.backend,
                              "best": t.setting,
                              "best_ms": t.best.median_ms if t.best else float("nan"),

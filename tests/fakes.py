@@ -44,10 +44,11 @@ class LeavesFiles(Brute):
         os.kill(os.getpid(), signal.SIGSEGV)
 
 
-def register(monkeypatch, *classes) -> None:
-    """Register test backends (family "test") for the duration of one test."""
+def register(monkeypatch, *classes, roles: registry.Roles = registry.Roles()) -> None:
+    """Register test backends (family "test", or that of their name's prefix where it is one) for
+    the duration of one test, each with `roles`."""
     monkeypatch.setitem(registry.FAMILIES, "test", TEST_FAMILY)
     for cls in classes:
-        monkeypatch.setitem(registry.BACKENDS, cls.name, f"{cls.__module__}:{cls.__name__}")
+        monkeypatch.setitem(registry.BACKENDS, cls.name, registry.Entry(f"{cls.__module__}:{cls.__name__}", roles))
     # A fresh cache of loaded classes for this test; the registry's own comes back afterwards.
     monkeypatch.setattr(registry, "_load", cache(registry._load.__wrapped__))

@@ -10,10 +10,13 @@ import sys
 import tomllib
 from pathlib import Path
 
+import pandas as pd
 import pytest
 
 import engines
-from studies import COMMANDS
+from fakes import register
+from own.brute import Brute
+from studies import COMMANDS, bench, scenes, tune
 from test_own_exact import EXACT
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -45,11 +48,63 @@ def test_every_family_package_is_pinned_in_pyproject_as_the_registry_says():
 def test_an_unavailable_backend_says_how_to_install_it(monkeypatch):
     from interface import registry
 
-    monkeypatch.setitem(registry.BACKENDS, "chipmunk.missing", "engines.no_such_adapter:Nothing")
+    monkeypatch.setitem(registry.BACKENDS, "chipmunk.missing", registry.Entry("engines.no_such_adapter:Nothing"))
     with pytest.raises(ValueError, match=r"not available here \(ModuleNotFoundError.*install it with: pip install "
                                          r"\"pymunk==7\.3\.1\""):
         engines.create("chipmunk.missing")
     assert "install it with" in engines.unavailable()["chipmunk.missing"]
+
+
+class Planned(Exception):
+    """Raised where a study would start running its plan."""
+
+
+class OneOfOurs(Brute):
+    """A backend of ours the studies have never heard of, but for its registered roles."""
+
+    name = "own.newcomer"
+
+
+class OursOnEveryCore(Brute):
+    name = "own.newcomer_parallel"
+
+
+def test_a_backend_registered_with_roles_is_in_every_study_that_runs_them(monkeypatch, tmp_path):
+    coherence = ({"coherent": False}, {"coherent": True})
+    register(monkeypatch, OneOfOurs, roles=engines.Roles(tuned=True, structured=True, bench_row="own.newcomer",
+                                                          coherence=coherence))
+    register(monkeypatch, OursOnEveryCore, roles=engines.Roles(bench_row="own.newcomer", every_core=True))
+    # bench: its row on one thread, its parallel form measured apart, and the coherence table.
+    assert bench.bench_rows(2, every_core=False)["own.newcomer"] == ["own.newcomer"]
+    assert bench.bench_rows(2, every_core=True)["own.newcomer"] == ["own.newcomer_parallel"]
+    assert "own.newcomer" not in bench.bench_rows(2, every_core=True).get("own.grid", [])
+    assert bench.coherence_settings()["own.newcomer"] == coherence
+    # every core: never set against the engines on one thread.
+    assert engines.ours_on_one_thread("own.newcomer") and not engines.ours_on_one_thread("own.newcomer_parallel")
+    # scenes: a structured backend over 3x our fastest is named in the verdict.
+    table = pd.DataFrame({"total_ms": [1.0, 4.0, 0.5], "broad_ms": [1.0, 4.0, 0.5], "missed_total": [0, 0, 0]},
+                         index=["own.grid", "own.newcomer", "own.newcomer_parallel"])
+    assert scenes.verdict(table)["slow"] == {"own.newcomer": 4.0}
+    # tune: among the backends its scene families run.
+    tuned = []
+
+    def planned(runner, scene, backends, args, exact_only=False):
+        tuned.extend(backends)
+        raise Planned  # the plan is all this test wants: stop before anything runs
+
+    monkeypatch.setattr(tune, "run_tune", planned)
+    monkeypatch.setattr(tune, "QUICK_FAMILIES", ("uniform r=10",))
+    monkeypatch.setattr(tune, "QUICK_FAMILY_SIZES", (64,))
+    with pytest.raises(Planned):
+        tune.main(["--families", "--quick", "--out", str(tmp_path / "o"), "--report-dir", str(tmp_path / "r")])
+    assert "own.newcomer" in tuned and "own.newcomer_parallel" not in tuned
+
+
+def test_roles_are_read_from_the_registry_alone():
+    assert engines.with_role("every_core") == ["own.sap_parallel", "own.grid_parallel"]
+    assert set(engines.with_role("tuned")) == set(engines.with_role("structured"))
+    with pytest.raises(ValueError, match="unknown role 'fast'"):
+        engines.with_role("fast")
 
 
 def test_every_registered_exact_own_backend_is_in_the_exactness_tests():

@@ -157,7 +157,7 @@ def test_families_report_lists_every_family_and_backend(tmp_path, monkeypatch):
     assert tune.main(["--families", "--quick", "--out", str(tmp_path / "o"), "--report-dir", str(tmp_path / "r")]) == 0
     report = (tmp_path / "r" / "TUNING.md").read_text()
     for family in ("uniform r=10", "mixed r=1..100"):
-        for backend in tune.OWN:
+        for backend in engines.with_role("tuned"):
             assert f"| {family} | 128 | {backend} |" in report
     assert (tmp_path / "r" / "figures" / "tuning_rules.png").exists()
 

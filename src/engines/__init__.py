@@ -3,22 +3,10 @@ callers: `create(name, **params)`, `names()`, `available()` (the interface itsel
 `interface`, the floor every other package stands on)."""
 
 from interface.base import BroadPhase, PairArray
-from interface.registry import (
-                                FAMILIES,
-                                Family,
-                                available,
-                                backend_class,
-                                create,
-                                description,
-                                family,
-                                match,
-                                names,
-                                of_kind,
-                                ours_on_one_thread,
-                                unavailable,
-                                uses_every_core,
-                                works_in,
-)
+from interface.registry import (FAMILIES, Family, Roles, available, backend_class, create, description, family, match,
+                                names, of_kind, ours_on_one_thread, roles, unavailable, uses_every_core, with_role,
+                                works_in)
 
-__all__ = ["FAMILIES", "BroadPhase", "Family", "PairArray", "available", "backend_class", "create", "description", "family", "match",
-           "names", "of_kind", "ours_on_one_thread", "unavailable", "uses_every_core", "works_in"]
+__all__ = ["FAMILIES", "BroadPhase", "Family", "PairArray", "Roles", "available", "backend_class", "create",
+           "description", "family", "match", "names", "of_kind", "ours_on_one_thread", "roles", "unavailable",
+           "uses_every_core", "with_role", "works_in"]

@@ -4,7 +4,8 @@ Importing is lazy, so a missing engine package only makes its own backends unava
 reason and the line that installs it kept for `--list`. What a study needs to know about a backend
 comes from here (its family: kind, package, install line, colour) or from its class (what it
 reports, its parameters and their sweep values, its kind of structure): adding an engine is one
-adapter module, one entry in BACKENDS, and its family in FAMILIES.
+adapter module, one entry in BACKENDS (with its roles in the studies, for ours), and its family in
+FAMILIES.
 """
 
 from __future__ import annotations
@@ -76,55 +77,87 @@ FAMILIES: dict[str, Family] = {f.name: f for f in [
     Family("sklearn", "particle", "scikit-learn's trees", "darkorchid", ("scikit-learn==1.9.1",)),
 ]}
 
-# name -> "module:Class". Engine adapters import their binding at module level, so an import
-# failure of the module is exactly "this engine is not usable here".
-BACKENDS: dict[str, str] = {
-    "own.brute": "own.brute:Brute",
-    "own.sap": "own.sap:SweepAndPrune",
-    "own.sap_incremental": "own.sap:IncrementalSweepAndPrune",
-    "own.sap_parallel": "own.sap:ParallelSweepAndPrune",
-    "own.grid": "own.grid:UniformGrid",
-    "own.grid_incremental": "own.grid_incremental:IncrementalGrid",
-    "own.grid_parallel": "own.grid_parallel:ParallelIncrementalGrid",
-    "own.quadtree": "own.quadtree:Quadtree",
-    "own.bvh": "own.bvh:LinearBvh",
-    "own.verlet": "own.verlet:VerletList",
-    "own.grid_swept": "own.swept:SweptGrid",
-    "own.sap_swept": "own.swept:SweptSap",
-    "essay.sap": "own.essay.sap:EssaySweepAndPrune",
-    "essay.grid": "own.essay.grid:EssayGrid",
-    "essay.quadtree": "own.essay.quadtree:EssayQuadtree",
-    "chipmunk.bbtree": "engines.chipmunk:ChipmunkTree",
-    "chipmunk.hash": "engines.chipmunk:ChipmunkHash",
-    "chipmunk.sweep1d": "engines.chipmunk_index:ChipmunkSweep1D",
-    "chipmunk.bbtree_index": "engines.chipmunk_index:ChipmunkTreeIndex",
-    "chipmunk.hash_index": "engines.chipmunk_index:ChipmunkHashIndex",
-    "bullet.dbvt": "engines.bullet:BulletDbvt",
-    "bullet.simple": "engines.bullet:BulletSimple",
-    "fcl.tree": "engines.fcl_tree:FclTree",
-    "coal.naive": "engines.coal_managers:CoalNaive",
-    "coal.sap": "engines.coal_managers:CoalSap",
-    "coal.ssap": "engines.coal_managers:CoalSimpleSap",
-    "coal.interval": "engines.coal_managers:CoalIntervalTree",
-    "coal.tree": "engines.coal_managers:CoalTree",
-    "coal.tree_array": "engines.coal_managers:CoalTreeArray",
-    "coal.hash": "engines.coal_managers:CoalHash",
-    "physx.sap": "engines.physx:PhysXSap",
-    "physx.mbp": "engines.physx:PhysXMbp",
-    "physx.pabp": "engines.physx:PhysXPabp",
-    "box2d.v2": "engines.box2d:Box2DV2",
-    "box2d.v3": "engines.box2d:Box2DV3",
-    "rapier.bvh": "engines.rapier:RapierBvh",
-    "mujoco.sap": "engines.mujoco_collision:MujocoSap",
-    "warp.hashgrid": "engines.warp_grid:WarpHashGrid",
-    "scipy.kdtree": "engines.scipy_kdtree:KDTree",
-    "mdanalysis.nsgrid": "engines.mdanalysis_ns:MdaFastNS",
-    "freud.aabb": "engines.freud_locality:FreudAabb",
-    "freud.linkcell": "engines.freud_locality:FreudLinkCell",
-    "matscipy.cells": "engines.matscipy_neighbours:MatscipyCells",
-    "vesin.cells": "engines.vesin_neighbours:VesinCells",
-    "sklearn.kdtree": "engines.sklearn_neighbors:SklearnKDTree",
-    "sklearn.balltree": "engines.sklearn_neighbors:SklearnBallTree",
+@dataclass(frozen=True)
+class Roles:
+    """What the studies run one of our backends for. A study's plan is read from these, so a backend
+    registered with a role is in every study that runs that role (no study keeps a list of its own)."""
+
+    tuned: bool = False  # tune sweeps its knobs (tune's default set of backends)
+    structured: bool = False  # one of our structures the scenes study holds within WITHIN of our fastest
+    bench_row: str = ""  # bench measures it in this row, beside the others of the row, and shows the fastest
+    every_core: bool = False  # it runs on every core: measured apart, never set against one-thread engines
+    # bench --coherence: (parameters that sort from scratch every frame, parameters that keep last
+    # frame's order and repair it)
+    coherence: tuple[dict, dict] | None = None
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One registered backend: where its class lives ("module:Class") and its roles."""
+
+    where: str
+    roles: Roles = Roles()
+
+
+SORTED_AFRESH_OR_KEPT = ({"coherent": False}, {"coherent": True})  # a `coherent` switch, as our grid and trees have
+
+# name -> Entry. Engine adapters import their binding at module level, so an import failure of the
+# module is exactly "this engine is not usable here".
+BACKENDS: dict[str, Entry] = {
+    "own.brute": Entry("own.brute:Brute", Roles(bench_row="own.brute")),
+    "own.sap": Entry("own.sap:SweepAndPrune", Roles(
+        tuned=True, structured=True, bench_row="own.sap",
+        coherence=({"incremental": False, "skin": 0}, {"incremental": True}))),  # no skin: every frame sorted afresh
+    "own.sap_incremental": Entry("own.sap:IncrementalSweepAndPrune", Roles(tuned=True, structured=True,
+                                                                           bench_row="own.sap")),
+    "own.sap_parallel": Entry("own.sap:ParallelSweepAndPrune", Roles(bench_row="own.sap", every_core=True)),
+    "own.grid": Entry("own.grid:UniformGrid", Roles(tuned=True, structured=True, bench_row="own.grid",
+                                                    coherence=SORTED_AFRESH_OR_KEPT)),
+    "own.grid_incremental": Entry("own.grid_incremental:IncrementalGrid", Roles(tuned=True, structured=True,
+                                                                                bench_row="own.grid")),
+    "own.grid_parallel": Entry("own.grid_parallel:ParallelIncrementalGrid", Roles(bench_row="own.grid",
+                                                                                  every_core=True)),
+    "own.quadtree": Entry("own.quadtree:Quadtree", Roles(tuned=True, structured=True, bench_row="own.quadtree",
+                                                         coherence=SORTED_AFRESH_OR_KEPT)),
+    "own.bvh": Entry("own.bvh:LinearBvh", Roles(tuned=True, structured=True, bench_row="own.bvh",
+                                                coherence=SORTED_AFRESH_OR_KEPT)),
+    "own.verlet": Entry("own.verlet:VerletList", Roles(tuned=True, structured=True, bench_row="own.verlet")),
+    "own.grid_swept": Entry("own.swept:SweptGrid"),
+    "own.sap_swept": Entry("own.swept:SweptSap"),
+    "essay.sap": Entry("own.essay.sap:EssaySweepAndPrune"),
+    "essay.grid": Entry("own.essay.grid:EssayGrid"),
+    "essay.quadtree": Entry("own.essay.quadtree:EssayQuadtree"),
+    "chipmunk.bbtree": Entry("engines.chipmunk:ChipmunkTree"),
+    "chipmunk.hash": Entry("engines.chipmunk:ChipmunkHash"),
+    "chipmunk.sweep1d": Entry("engines.chipmunk_index:ChipmunkSweep1D"),
+    "chipmunk.bbtree_index": Entry("engines.chipmunk_index:ChipmunkTreeIndex"),
+    "chipmunk.hash_index": Entry("engines.chipmunk_index:ChipmunkHashIndex"),
+    "bullet.dbvt": Entry("engines.bullet:BulletDbvt"),
+    "bullet.simple": Entry("engines.bullet:BulletSimple"),
+    "fcl.tree": Entry("engines.fcl_tree:FclTree"),
+    "coal.naive": Entry("engines.coal_managers:CoalNaive"),
+    "coal.sap": Entry("engines.coal_managers:CoalSap"),
+    "coal.ssap": Entry("engines.coal_managers:CoalSimpleSap"),
+    "coal.interval": Entry("engines.coal_managers:CoalIntervalTree"),
+    "coal.tree": Entry("engines.coal_managers:CoalTree"),
+    "coal.tree_array": Entry("engines.coal_managers:CoalTreeArray"),
+    "coal.hash": Entry("engines.coal_managers:CoalHash"),
+    "physx.sap": Entry("engines.physx:PhysXSap"),
+    "physx.mbp": Entry("engines.physx:PhysXMbp"),
+    "physx.pabp": Entry("engines.physx:PhysXPabp"),
+    "box2d.v2": Entry("engines.box2d:Box2DV2"),
+    "box2d.v3": Entry("engines.box2d:Box2DV3"),
+    "rapier.bvh": Entry("engines.rapier:RapierBvh"),
+    "mujoco.sap": Entry("engines.mujoco_collision:MujocoSap"),
+    "warp.hashgrid": Entry("engines.warp_grid:WarpHashGrid"),
+    "scipy.kdtree": Entry("engines.scipy_kdtree:KDTree"),
+    "mdanalysis.nsgrid": Entry("engines.mdanalysis_ns:MdaFastNS"),
+    "freud.aabb": Entry("engines.freud_locality:FreudAabb"),
+    "freud.linkcell": Entry("engines.freud_locality:FreudLinkCell"),
+    "matscipy.cells": Entry("engines.matscipy_neighbours:MatscipyCells"),
+    "vesin.cells": Entry("engines.vesin_neighbours:VesinCells"),
+    "sklearn.kdtree": Entry("engines.sklearn_neighbors:SklearnKDTree"),
+    "sklearn.balltree": Entry("engines.sklearn_neighbors:SklearnBallTree"),
 }
 
 
@@ -150,13 +183,24 @@ def family(name: str) -> Family:
     return FAMILIES[prefix]
 
 
-# Our backends that run on every core; every other backend here, engines included, runs on one.
-EVERY_CORE = ("own.sap_parallel", "own.grid_parallel")
+def roles(name: str) -> Roles:
+    """The backend's roles in the studies (none for an engine's)."""
+    if name not in BACKENDS:
+        raise ValueError(f"unknown backend {name!r}; known: {', '.join(BACKENDS)}")
+    return BACKENDS[name].roles
+
+
+def with_role(role: str) -> list[str]:
+    """The backends, in registry order, whose `role` (a field of Roles) is set."""
+    if role not in Roles.__dataclass_fields__:
+        raise ValueError(f"unknown role {role!r}; known: {', '.join(Roles.__dataclass_fields__)}")
+    return [name for name, entry in BACKENDS.items() if getattr(entry.roles, role)]
 
 
 def uses_every_core(name: str, params: dict | None = None) -> bool:
-    """Whether the backend, with these parameters, runs on every core (our SAP with `parallel`)."""
-    return name in EVERY_CORE or bool((params or {}).get("parallel"))
+    """Whether the backend, with these parameters, runs on every core (one registered so, or our
+    SAP with `parallel`); every other backend here, engines included, runs on one."""
+    return roles(name).every_core or bool((params or {}).get("parallel"))
 
 
 def ours_on_one_thread(name: str) -> bool:
@@ -172,7 +216,7 @@ def of_kind(name: str, *kinds: Kind) -> bool:
 @cache
 def _load(name: str) -> type[BroadPhase] | str:
     """The backend class, or the reason it cannot be imported here."""
-    module, _, cls = BACKENDS[name].partition(":")
+    module, _, cls = BACKENDS[name].where.partition(":")
     try:
         return getattr(importlib.import_module(module), cls)
     except Exception as exc:  # any import-time failure of an engine binding makes it unavailable
