@@ -19,13 +19,20 @@ import pandas as pd
 import engines
 from scenes import FAMILIES
 from scenes.costs import size_problem
-from scenes.families3d import FAMILIES_3D
+from scenes.families import families_in
 from scenes.generate import at_essay_density
 
 from .lib.cli import CliError, Parser, command_line, in_dimension, matched_backends, run_cli, warn_unavailable
 from .lib.harness import Job
-from .lib.options import (add_backends_option, add_dim_option, add_output_options, add_quick_option,
-                          add_trial_options, dim_of, parse_checked)
+from .lib.options import (
+    add_backends_option,
+    add_dim_option,
+    add_output_options,
+    add_quick_option,
+    add_trial_options,
+    dim_of,
+    parse_checked,
+)
 from .lib.output import Output, read_meta, report_folder
 from .lib.pool import Pool
 from .lib.results import RowWriter, missed_total, ok_lines, read_rows, summarise
@@ -40,7 +47,7 @@ def parser() -> Parser:
     p = Parser(prog="python -m studies.scenes", description=__doc__.split("\n\n")[0])
     p.add_argument("--families", metavar="NAME[,NAME]",
                    help=f"scene families (default: {ESSAY_MOTION}, the essay's motion, and {', '.join(FAMILIES)}; "
-                        f"over spheres {', '.join(FAMILIES_3D)})")
+                        f"over spheres {', '.join(families_in(3))})")
     add_dim_option(p)
     p.add_argument("--sizes", default="4096,65536", metavar="N[,N]", help="object counts (default 4096,65536)")
     add_backends_option(p)
@@ -74,7 +81,7 @@ def parse(argv: list[str] | None):
 
 def known_families(dim: int) -> tuple[str, ...]:
     """The essay's motion and the families recorded in this dimension."""
-    return (ESSAY_MOTION,) + (FAMILIES if dim == 2 else FAMILIES_3D)
+    return (ESSAY_MOTION,) + families_in(dim)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -281,7 +281,7 @@ def write_tuning_md(table: pd.DataFrame, curves: pd.DataFrame, path: Path, args)
         f"- `own.bvh`: at most {LinearBvh.defaults['leaf_size']} objects per leaf; at zero skin, refitted until the node",
         f"  pairs its searches visited since the build exceed one search by {REFIT_DRIFT:g} of it (`REFIT_DRIFT`).",
         f"- `own.verlet` (and the trees' kept pairs): skin {DEFAULT_SKIN_DIAMETERS} mean diameters to start, dropped to zero after",
-        f"  two lists in a row that lived one frame, halved where the pairs its skin added per object times the frames a list",
+        "  two lists in a row that lived one frame, halved where the pairs its skin added per object times the frames a list",
         f"  lived reached {SHRINK_GAIN:g}, doubled (up to {LARGEST_SKIN_DIAMETERS:g} mean "
         f"diameter{'' if LARGEST_SKIN_DIAMETERS == 1 else 's'}) where that stayed under "
         f"{SHRINK_GAIN / GROW_MARGIN:.3g} (`own/skin.py`;",

@@ -12,11 +12,11 @@ import pandas as pd
 import pytest
 
 from scenes import FAMILIES, generate
-from scenes.families import TRAITS, FamilyMotion, cache_dir
-from scenes.families3d import FAMILIES_3D
+from scenes.families import FAMILIES_3D, TRAITS, FamilyMotion, cache_dir
 from scenes.motion import simulate
 from scenes.recorded import TrajectoryFileError, load_trajectory, save_trajectory
-from studies import compare, recommend, scenes as scenes_study
+from studies import compare, recommend
+from studies import scenes as scenes_study
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 

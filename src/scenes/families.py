@@ -29,26 +29,55 @@ import os
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 from tqdm import tqdm
 
 from interface.checks import shown
 
-from .families3d import FAMILIES_3D, RECIPES_3D
-from .families3d import layout as layout_3d
+from . import families3d
 from .recorded import Recording, fill_absent
 from .scene import Scene, check_box
 
-FAMILIES: tuple[str, ...] = ("pile", "rain", "tumbler", "smash", "level", "drum")
-TRAITS: dict[str, str] = {
-    "pile": "resting contact (objects jitter in place under gravity)",
-    "rain": "spawning and removal every few frames over a static ground",
-    "tumbler": "everything in motion in a rotating container",
-    "smash": "one large fast object through a resting block",
-    "level": "most objects static, movers falling through them",
-    "drum": "everything in motion, a fast layer cascading over a bed turning with the wall",
-}
+
+@dataclass(frozen=True)
+class SceneFamily:
+    """Everything of one family in one record, over circles and spheres alike: what it has that the
+    essay's motion lacks (`trait`: recommend names it), which slots are static, how the radii are
+    drawn, and per dimension the box it is recorded in and the recipe that records it.
+
+    A scene is drawn as: radii uniform in the family's bounds; the first `static_share` of the
+    slots static, at the smallest radius; the last slot `projectile` times the largest radius
+    where that is set; then `boxes[dim](n, radii, largest radius)`, and `recipes[dim](n, rng,
+    radii bounds, frames, layout)` records the motion from the same random stream."""
+
+    name: str
+    trait: str
+    boxes: dict[int, Callable[[int, np.ndarray, float], tuple[float, ...]]]
+    recipes: dict[int, Callable[..., dict]]
+    static_share: float = 0.0
+    projectile: float = 0.0
+
+    def static(self, n: int) -> np.ndarray | None:
+        count = int(self.static_share * n)
+        if not count:
+            return None
+        static = np.zeros(n, dtype=bool)
+        static[:count] = True  # statics first: slots 0..count-1
+        return static
+
+    def layout(self, n: int, rng: np.random.Generator, radii: tuple[float, float], dim: int) -> dict:
+        """Radii, box and statics of a scene of n slots (the draws its recipe's scene starts from)."""
+        lo, hi = radii
+        r = rng.uniform(lo, hi, n)
+        static = self.static(n)
+        if static is not None:
+            r[static] = lo
+        if self.projectile:
+            r[-1] = self.projectile * hi
+        return {"radii": r, "box": self.boxes[dim](n, r, hi), "static": static}
+
 DEFAULT_RADII = (4.0, 8.0)
 FIRST_FRAMES = 32  # recorded when the scene is made; more are recorded when a study asks for them
 STEP_DT, SUBSTEPS = 1.0 / 60.0, 2
@@ -61,6 +90,8 @@ DRUM_TURN_DEGREES, DRUM_SIDES, DRUM_FILL = 60.0, 72, 0.4
 # (Box2D's rain: a column every 8 steps, the oldest of 40 destroyed): about 80% of the slots alive.
 RAIN_GROUPS, RAIN_PERIOD, RAIN_LIFE = 40, 4, (100, 160)
 LEVEL_STATIC_SHARE = 0.8
+RAIN_STATIC_SHARE = 0.25  # the static ground: a quarter of the slots
+SMASH_PROJECTILE_RADII = 10.0  # the heavy circle's radius, in the others' largest
 
 
 def cache_dir() -> Path:
@@ -111,15 +142,16 @@ class FamilyMotion:
         return self._simulate(max(frames, FIRST_FRAMES)).record(frames)
 
     def _simulate(self, frames: int) -> Recording:
-        recipes = RECIPES if self.dim == 2 else RECIPES_3D
-        fields = recipes[self.family](self.n, np.random.default_rng(self.seed), self.radii, frames)
+        family, rng = SCENE_FAMILIES[self.family], np.random.default_rng(self.seed)
+        layout = family.layout(self.n, rng, self.radii, self.dim)
+        fields = family.recipes[self.dim](self.n, rng, self.radii, frames, layout)
         folder = cache_dir()
         folder.mkdir(parents=True, exist_ok=True)
         path = folder / f"{self.stem}-f{frames}.npz"
         fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.stem}.", suffix=".npz")
         os.close(fd)
         try:
-            # The motion only: radii, box and statics come from _layout, which draws them the same.
+            # The motion only: radii, box and statics come from the family's layout, which draws them the same.
             np.savez(tmp, **{k: fields[k] for k in ("positions", "alive") if fields.get(k) is not None})
             os.replace(tmp, path)
         finally:
@@ -136,9 +168,9 @@ def family_scene(family: str, n: int, seed: int = 0, radii: tuple[float, float] 
     """A scene of `family` with n objects (slots, for rain), circles of radii uniform in `radii`."""
     if family not in FAMILIES:
         raise ValueError(f"unknown family {family!r}; choose one of {', '.join(FAMILIES)}")
-    if dim == 3 and family not in FAMILIES_3D:
+    if dim not in SCENE_FAMILIES[family].recipes:
         raise ValueError(f"the {family} family is a scene of circles; over spheres the families are "
-                         f"{', '.join(FAMILIES_3D)} (or your own trajectory file with a z column)")
+                         f"{', '.join(families_in(3))} (or your own trajectory file with a z column)")
     if int(n) != n or n < 2:
         raise ValueError(f"a {family} scene needs n >= 2 objects, got {shown(n)}")
     lo, hi = (float(v) for v in (radii or DEFAULT_RADII))
@@ -146,56 +178,50 @@ def family_scene(family: str, n: int, seed: int = 0, radii: tuple[float, float] 
         raise ValueError(f"radii bounds must satisfy 0 < min <= max, got {shown(radii)}")
     motion = FamilyMotion(family, int(n), int(seed), (lo, hi), dim)
     record = motion.record(FIRST_FRAMES)
-    fields = (_layout if dim == 2 else layout_3d)(family, int(n), np.random.default_rng(seed), (lo, hi))
+    fields = SCENE_FAMILIES[family].layout(int(n), np.random.default_rng(seed), (lo, hi), dim)
     return Scene(record.positions[0], fields["radii"], np.zeros((int(n), dim)), box=check_box(fields["box"], dim),
                  name=f"{family}-n{n}-r{lo:g}-{hi:g}-s{seed}" + ("" if dim == 2 else f"-{dim}d"), walls=False,
                  responds=False, static=fields["static"], motion=motion, meta={"dist": family, "seed": seed, "speed": ""})
 
 
-# ---- the recipes: layout (radii, box, who is static) and the simulation --------------------------
+# ---- the recipes over circles: the box each is recorded in, and the simulation -----------------
 
-def _static_of(family: str, n: int) -> np.ndarray | None:
-    count = {"rain": n // 4, "level": int(LEVEL_STATIC_SHARE * n)}.get(family, 0)
-    if not count:
-        return None
-    static = np.zeros(n, dtype=bool)
-    static[:count] = True  # statics first: slots 0..count-1
-    return static
+def _mean_area(r: np.ndarray) -> float:
+    return math.pi * float(np.mean(r * r))
 
 
-def _layout(family: str, n: int, rng: np.random.Generator, radii: tuple[float, float]) -> dict:
-    """Radii and box of a family scene (the same draws as its simulation makes first)."""
-    lo, hi = radii
-    r = rng.uniform(lo, hi, n)
-    statics = _static_of(family, n)
-    if statics is not None:
-        r[statics] = lo
-    if family == "smash":
-        r[-1] = 10.0 * hi  # the projectile
-    mean_area = math.pi * float(np.mean(r * r))
-    if family == "pile":
-        width = math.sqrt(2.0 * n * mean_area / 0.8)  # a pile about half as high as wide
-        box = (0.0, 0.0, width, 2.5 * width)
-    elif family == "rain":
-        width = math.sqrt(3.0 * n * mean_area / 0.5)
-        box = (0.0, -4.0 * hi, width, 0.6 * width)
-    elif family == "tumbler":
-        side = math.sqrt(n * mean_area / 0.45)
-        half = side * math.sqrt(0.5) + hi
-        box = (-half, -half, half, half)
-    elif family == "smash":
-        cols = int(math.ceil(math.sqrt(1.5 * n)))
-        width = cols * 2.0 * hi
-        box = (-0.6 * width, -0.2 * width, 1.1 * width, 0.9 * width)
-    elif family == "drum":
-        half = _drum_radius(n, hi) + hi
-        box = (-half, -half, half, half)
-    else:  # level
-        spacing = 4.0 * hi
-        cols = int(math.ceil(math.sqrt(int(LEVEL_STATIC_SHARE * n))))
-        width = cols * spacing
-        box = (-spacing, -spacing, width + spacing, width + 3 * spacing)
-    return {"radii": r, "box": box, "static": statics}
+def _pile_box(n, r, hi):
+    width = math.sqrt(2.0 * n * _mean_area(r) / 0.8)  # a pile about half as high as wide
+    return (0.0, 0.0, width, 2.5 * width)
+
+
+def _rain_box(n, r, hi):
+    width = math.sqrt(3.0 * n * _mean_area(r) / 0.5)
+    return (0.0, -4.0 * hi, width, 0.6 * width)
+
+
+def _tumbler_box(n, r, hi):
+    side = math.sqrt(n * _mean_area(r) / 0.45)
+    half = side * math.sqrt(0.5) + hi
+    return (-half, -half, half, half)
+
+
+def _smash_box(n, r, hi):
+    cols = int(math.ceil(math.sqrt(1.5 * n)))
+    width = cols * 2.0 * hi
+    return (-0.6 * width, -0.2 * width, 1.1 * width, 0.9 * width)
+
+
+def _level_box(n, r, hi):
+    spacing = 4.0 * hi
+    cols = int(math.ceil(math.sqrt(int(LEVEL_STATIC_SHARE * n))))
+    width = cols * spacing
+    return (-spacing, -spacing, width + spacing, width + 3 * spacing)
+
+
+def _drum_box(n, r, hi):
+    half = _drum_radius(n, hi) + hi
+    return (-half, -half, half, half)
 
 
 def _space(gravity: float):
@@ -253,8 +279,7 @@ def _lattice(count: int, x0: float, y0: float, cols: int, spacing: float, rng, j
     return xy + rng.uniform(-jitter, jitter, xy.shape)
 
 
-def _pile(n, rng, radii, frames):
-    lay = _layout("pile", n, rng, radii)
+def _pile(n, rng, radii, frames, lay):
     r, (x0, _, x1, _) = lay["radii"], lay["box"]
     space = _space(GRAVITY)
     _walls(space, [(x0, 2.5 * (x1 - x0)), (x0, 0.0), (x1, 0.0), (x1, 2.5 * (x1 - x0))])
@@ -267,8 +292,7 @@ def _pile(n, rng, radii, frames):
     return {"positions": _run(space, bodies, frames, warmup, "pile"), "radii": r, "box": lay["box"]}
 
 
-def _rain(n, rng, radii, frames):
-    lay = _layout("rain", n, rng, radii)
+def _rain(n, rng, radii, frames, lay):
     r, static, (x0, y0, x1, y1) = lay["radii"], lay["static"], lay["box"]
     space = _space(GRAVITY)
     statics = int(static.sum())
@@ -311,10 +335,9 @@ def _rain(n, rng, radii, frames):
     return {"positions": fill_absent(positions, alive), "alive": alive, "radii": r, "box": lay["box"]}
 
 
-def _tumbler(n, rng, radii, frames):
+def _tumbler(n, rng, radii, frames, lay):
     import pymunk
 
-    lay = _layout("tumbler", n, rng, radii)
     r, half = lay["radii"], lay["box"][2] - radii[1]
     side = half / math.sqrt(0.5)
     space = _space(GRAVITY)
@@ -330,8 +353,7 @@ def _tumbler(n, rng, radii, frames):
     return {"positions": _run(space, bodies, frames, 60, "tumbler"), "radii": r, "box": lay["box"]}
 
 
-def _smash(n, rng, radii, frames):
-    lay = _layout("smash", n, rng, radii)
+def _smash(n, rng, radii, frames, lay):
     r = lay["radii"]
     space = _space(0.0)
     block = n - 1
@@ -347,8 +369,7 @@ def _smash(n, rng, radii, frames):
     return {"positions": _run(space, bodies, frames, 5, "smash"), "radii": r, "box": lay["box"]}
 
 
-def _level(n, rng, radii, frames):
-    lay = _layout("level", n, rng, radii)
+def _level(n, rng, radii, frames, lay):
     r, static = lay["radii"], lay["static"]
     space = _space(GRAVITY)
     statics = int(static.sum())
@@ -381,10 +402,9 @@ def _drum_radius(n: int, hi: float) -> float:
     return math.sqrt(n * spacing * spacing / (math.pi * DRUM_FILL)) + spacing
 
 
-def _drum(n, rng, radii, frames):
+def _drum(n, rng, radii, frames, lay):
     import pymunk
 
-    lay = _layout("drum", n, rng, radii)
     r = lay["radii"]
     big = _drum_radius(n, radii[1])
     space = _space(GRAVITY)
@@ -404,4 +424,29 @@ def _drum(n, rng, radii, frames):
     return {"positions": _run(space, bodies, frames, 120, "drum"), "radii": r, "box": lay["box"]}
 
 
-RECIPES = {"pile": _pile, "rain": _rain, "tumbler": _tumbler, "smash": _smash, "level": _level, "drum": _drum}
+SCENE_FAMILIES: dict[str, SceneFamily] = {f.name: f for f in [
+    SceneFamily("pile", "resting contact (objects jitter in place under gravity)",
+                boxes={2: _pile_box, 3: families3d.pile_box}, recipes={2: _pile, 3: families3d.pile}),
+    SceneFamily("rain", "spawning and removal every few frames over a static ground",
+                boxes={2: _rain_box, 3: families3d.rain_box}, recipes={2: _rain, 3: families3d.rain},
+                static_share=RAIN_STATIC_SHARE),
+    SceneFamily("tumbler", "everything in motion in a rotating container",
+                boxes={2: _tumbler_box, 3: families3d.tumbler_box}, recipes={2: _tumbler, 3: families3d.tumbler}),
+    SceneFamily("smash", "one large fast object through a resting block",
+                boxes={2: _smash_box}, recipes={2: _smash}, projectile=SMASH_PROJECTILE_RADII),
+    SceneFamily("level", "most objects static, movers falling through them",
+                boxes={2: _level_box}, recipes={2: _level}, static_share=LEVEL_STATIC_SHARE),
+    SceneFamily("drum", "everything in motion, a fast layer cascading over a bed turning with the wall",
+                boxes={2: _drum_box}, recipes={2: _drum}),
+]}
+FAMILIES: tuple[str, ...] = tuple(SCENE_FAMILIES)
+TRAITS: dict[str, str] = {name: f.trait for name, f in SCENE_FAMILIES.items()}
+
+
+def families_in(dim: int) -> tuple[str, ...]:
+    """The families recorded in `dim` dimensions (every one over circles; over spheres those with a
+    recipe for them)."""
+    return tuple(name for name, f in SCENE_FAMILIES.items() if dim in f.recipes)
+
+
+FAMILIES_3D = families_in(3)

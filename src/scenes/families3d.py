@@ -1,6 +1,7 @@
-"""The scene families over spheres, recorded with Bullet (pybullet): a pile, rain and a tumbler, the
-3D counterparts of the circle families of scenes/families.py (the same traits, the same radii, 4
-to 8 units, and gravity, 900 units per s^2, along -z).
+"""The recipes of the scene families over spheres, recorded with Bullet (pybullet): a pile, rain and
+a tumbler, the 3D counterparts of the circle families (the same traits, the same radii, 4 to 8
+units, and gravity, 900 units per s^2, along -z). Each family's record in scenes/families.py names
+its box and recipe in each dimension.
 
 - `pile`: spheres dropped into a square container settle under gravity: resting contact.
 - `rain`: groups of spheres spawned at the top fall onto a static floor of small spheres (a
@@ -22,7 +23,6 @@ from interface.quiet import native_output_silenced
 
 from .recorded import fill_absent
 
-FAMILIES_3D: tuple[str, ...] = ("pile", "rain", "tumbler")
 STEP_DT, SUBSTEPS = 1.0 / 60.0, 2
 GRAVITY = 900.0
 FRICTION, RESTITUTION = 0.5, 0.1
@@ -33,34 +33,25 @@ TUMBLER_DEGREES_PER_S = 25.0
 TUMBLER_SPACING = 2.05  # the starting lattice's spacing, in largest radii
 
 
-def static_of(family: str, n: int) -> np.ndarray | None:
-    if family != "rain":
-        return None
-    static = np.zeros(n, dtype=bool)
-    static[:n // 4] = True  # statics first: slots 0..n/4-1
-    return static
+def _mean_volume(r: np.ndarray) -> float:
+    return 4.0 / 3.0 * math.pi * float(np.mean(r**3))
 
 
-def layout(family: str, n: int, rng: np.random.Generator, radii: tuple[float, float]) -> dict:
-    """Radii and box (six numbers) of a family scene over spheres (the same draws as its
-    simulation makes first)."""
-    lo, hi = radii
-    r = rng.uniform(lo, hi, n)
-    static = static_of(family, n)
-    if static is not None:
-        r[static] = lo
-    mean_volume = 4.0 / 3.0 * math.pi * float(np.mean(r**3))
-    if family == "pile":
-        width = (2.0 * n * mean_volume / 0.55) ** (1.0 / 3.0)  # settled, about half as high as wide
-        box = (0.0, 0.0, 0.0, width, width, 2.5 * width)
-    elif family == "rain":
-        width = (3.0 * n * mean_volume / 0.4) ** (1.0 / 3.0)
-        box = (0.0, 0.0, -4.0 * hi, width, width, 0.6 * width)
-    else:  # tumbler: a cube that holds the spheres' starting lattice with a layer to spare on each side
-        side = TUMBLER_SPACING * hi * (math.ceil(n ** (1.0 / 3.0) - 1e-9) + 2)
-        half = side * math.sqrt(0.75) + hi  # the cube's half diagonal: where its corners turn
-        box = (-half, -half, -half, half, half, half)
-    return {"radii": r, "box": box, "static": static}
+def pile_box(n, r, hi):
+    width = (2.0 * n * _mean_volume(r) / 0.55) ** (1.0 / 3.0)  # settled, about half as high as wide
+    return (0.0, 0.0, 0.0, width, width, 2.5 * width)
+
+
+def rain_box(n, r, hi):
+    width = (3.0 * n * _mean_volume(r) / 0.4) ** (1.0 / 3.0)
+    return (0.0, 0.0, -4.0 * hi, width, width, 0.6 * width)
+
+
+def tumbler_box(n, r, hi):
+    """A cube that holds the spheres' starting lattice with a layer to spare on each side."""
+    side = TUMBLER_SPACING * hi * (math.ceil(n ** (1.0 / 3.0) - 1e-9) + 2)
+    half = side * math.sqrt(0.75) + hi  # the cube's half diagonal: where its corners turn
+    return (-half, -half, -half, half, half, half)
 
 
 class _World:
@@ -133,8 +124,7 @@ def _record(world: _World, bodies: list[int], frames: int, warmup: int, what: st
     return out
 
 
-def pile(n, rng, radii, frames):
-    lay = layout("pile", n, rng, radii)
+def pile(n, rng, radii, frames, lay):
     r, width = lay["radii"], lay["box"][3]
     world = _World(GRAVITY)
     try:
@@ -150,8 +140,7 @@ def pile(n, rng, radii, frames):
     return {"positions": positions, "radii": r, "box": lay["box"]}
 
 
-def rain(n, rng, radii, frames):
-    lay = layout("rain", n, rng, radii)
+def rain(n, rng, radii, frames, lay):
     r, static, (x0, y0, z0, x1, y1, z1) = lay["radii"], lay["static"], lay["box"]
     statics = int(static.sum())
     world = _World(GRAVITY)
@@ -198,8 +187,7 @@ def rain(n, rng, radii, frames):
     return {"positions": fill_absent(positions, alive), "alive": alive, "radii": r, "box": lay["box"]}
 
 
-def tumbler(n, rng, radii, frames):
-    lay = layout("tumbler", n, rng, radii)
+def tumbler(n, rng, radii, frames, lay):
     r = lay["radii"]
     side = (lay["box"][3] - radii[1]) / math.sqrt(0.75)
     h = 0.5 * side
@@ -233,5 +221,3 @@ def tumbler(n, rng, radii, frames):
         world.close()
     return {"positions": positions, "radii": r, "box": lay["box"]}
 
-
-RECIPES_3D = {"pile": pile, "rain": rain, "tumbler": tumbler}

@@ -30,12 +30,12 @@ import argparse
 from pathlib import Path
 
 from scenes import DISTRIBUTIONS, ESSAY_COVERAGE, FAMILIES, SCENE_KINDS, Scene, generate
-from scenes.generate import cube
-from scenes.scene import DIMS
 from scenes.costs import size_problem
-from scenes.families3d import FAMILIES_3D
+from scenes.families import families_in
+from scenes.generate import cube
 from scenes.io import load_scene
 from scenes.recorded import load_trajectory
+from scenes.scene import DIMS
 
 from .cli import CliError
 from .output import in_use_by
@@ -50,7 +50,7 @@ def add_scene_options(parser: argparse.ArgumentParser, n: int = 2048) -> None:
     g.add_argument("--dist", choices=SCENE_KINDS, default="uniform",
                    help=f"placement moved by the essay's motion ({', '.join(DISTRIBUTIONS)}), or a family recorded "
                         f"with pymunk ({', '.join(FAMILIES)}; radii 4:8 unless given), over spheres with Bullet "
-                        f"({', '.join(FAMILIES_3D)}) (default uniform)")
+                        f"({', '.join(families_in(3))}) (default uniform)")
     sizes = g.add_mutually_exclusive_group()
     sizes.add_argument("--radius", type=float, help="equal radii (default 10, the essay's)")
     sizes.add_argument("--radii", metavar="MIN:MAX", help="mixed sizes, log-uniform between MIN and MAX")
