@@ -24,14 +24,8 @@ from scenes.costs import costs
 from .lib.cli import CliError, Parser, command_line, in_dimension, matched_backends, run_cli, warn_unavailable
 from .lib.figures import backend_colour, new_figure, save
 from .lib.harness import Job, Outcome, scene_columns
-from .lib.options import (
-    add_backends_option,
-    add_output_options,
-    add_scene_options,
-    add_trial_options,
-    parse_checked,
-    scene_from_args,
-)
+from .lib.options import (add_backends_option, add_output_options, add_scene_options, add_trial_options, parse_checked,
+                          scene_from_args)
 from .lib.output import Output, read_meta, write_json
 from .lib.pool import Pool
 from .lib.results import RowWriter, stored_runs

@@ -24,15 +24,8 @@ from scenes.generate import at_essay_density
 
 from .lib.cli import CliError, Parser, command_line, in_dimension, matched_backends, run_cli, warn_unavailable
 from .lib.harness import Job
-from .lib.options import (
-    add_backends_option,
-    add_dim_option,
-    add_output_options,
-    add_quick_option,
-    add_trial_options,
-    dim_of,
-    parse_checked,
-)
+from .lib.options import (add_backends_option, add_dim_option, add_output_options, add_quick_option, add_trial_options,
+                          dim_of, parse_checked)
 from .lib.output import Output, read_meta, report_folder
 from .lib.pool import Pool
 from .lib.results import RowWriter, missed_total, ok_lines, read_rows, summarise

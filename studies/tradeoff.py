@@ -29,17 +29,8 @@ from scenes import Scene, generate
 from .lib.cli import Parser, command_line, in_dimension, matched_backends, run_cli, warn_unavailable
 from .lib.figures import backend_colour, new_figure, pareto_front
 from .lib.harness import Job
-from .lib.options import (
-    add_backends_option,
-    add_dim_option,
-    add_output_options,
-    add_quick_option,
-    add_scene_file_option,
-    add_trial_options,
-    dim_of,
-    file_scene,
-    parse_checked,
-)
+from .lib.options import (add_backends_option, add_dim_option, add_output_options, add_quick_option,
+                          add_scene_file_option, add_trial_options, dim_of, file_scene, parse_checked)
 from .lib.output import Output, docs_folder, read_meta, write_json
 from .lib.pool import Pool
 from .lib.results import RowWriter, read_rows, summarise

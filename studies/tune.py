@@ -36,15 +36,8 @@ from scenes import Scene, generate
 
 from .lib.cli import CliError, Parser, command_line, in_dimension, matched_backends, run_cli, warn_unavailable
 from .lib.figures import new_figure, save
-from .lib.options import (
-    add_backends_option,
-    add_output_options,
-    add_quick_option,
-    add_scene_options,
-    add_trial_options,
-    parse_checked,
-    scene_from_args,
-)
+from .lib.options import (add_backends_option, add_output_options, add_quick_option, add_scene_options,
+                          add_trial_options, parse_checked, scene_from_args)
 from .lib.output import Output, read_meta, report_folder
 from .lib.pool import Pool
 from .lib.results import RowWriter, read_rows, stored_runs, summarise

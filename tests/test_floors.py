@@ -52,7 +52,9 @@ def imported(name: str, path: Path, known: dict[str, Path]) -> set[str]:
         for candidate in candidates:
             while candidate and candidate not in known:
                 candidate = candidate.rpartition(".")[0]
-            if candidate and candidate != name:
+            # A package the module lies in is loaded before it anyway ("from . import sibling"
+            # names it): no edge of its own.
+            if candidate and candidate != name and not name.startswith(candidate + "."):
                 targets.add(candidate)
     return targets
 

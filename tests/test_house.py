@@ -101,7 +101,7 @@ def test_a_backend_registered_with_roles_is_in_every_study_that_runs_them(monkey
 
 
 def test_roles_are_read_from_the_registry_alone():
-    assert engines.with_role("every_core") == ["own.sap_parallel", "own.grid_parallel"]
+    assert engines.with_role("every_core") == ["own.grid_parallel", "own.sap_parallel"]
     assert set(engines.with_role("tuned")) == set(engines.with_role("structured"))
     with pytest.raises(ValueError, match="unknown role 'fast'"):
         engines.with_role("fast")

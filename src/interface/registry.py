@@ -104,24 +104,24 @@ SORTED_AFRESH_OR_KEPT = ({"coherent": False}, {"coherent": True})  # a `coherent
 # name -> Entry. Engine adapters import their binding at module level, so an import failure of the
 # module is exactly "this engine is not usable here".
 BACKENDS: dict[str, Entry] = {
-    "own.brute": Entry("own.brute:Brute", Roles(bench_row="own.brute")),
-    "own.sap": Entry("own.sap:SweepAndPrune", Roles(
-        tuned=True, structured=True, bench_row="own.sap",
-        coherence=({"incremental": False, "skin": 0}, {"incremental": True}))),  # no skin: every frame sorted afresh
-    "own.sap_incremental": Entry("own.sap:IncrementalSweepAndPrune", Roles(tuned=True, structured=True,
-                                                                           bench_row="own.sap")),
-    "own.sap_parallel": Entry("own.sap:ParallelSweepAndPrune", Roles(bench_row="own.sap", every_core=True)),
     "own.grid": Entry("own.grid:UniformGrid", Roles(tuned=True, structured=True, bench_row="own.grid",
                                                     coherence=SORTED_AFRESH_OR_KEPT)),
     "own.grid_incremental": Entry("own.grid_incremental:IncrementalGrid", Roles(tuned=True, structured=True,
                                                                                 bench_row="own.grid")),
     "own.grid_parallel": Entry("own.grid_parallel:ParallelIncrementalGrid", Roles(bench_row="own.grid",
                                                                                   every_core=True)),
+    "own.sap": Entry("own.sap:SweepAndPrune", Roles(
+        tuned=True, structured=True, bench_row="own.sap",
+        coherence=({"incremental": False, "skin": 0}, {"incremental": True}))),  # no skin: every frame sorted afresh
+    "own.sap_incremental": Entry("own.sap:IncrementalSweepAndPrune", Roles(tuned=True, structured=True,
+                                                                           bench_row="own.sap")),
+    "own.sap_parallel": Entry("own.sap:ParallelSweepAndPrune", Roles(bench_row="own.sap", every_core=True)),
     "own.quadtree": Entry("own.quadtree:Quadtree", Roles(tuned=True, structured=True, bench_row="own.quadtree",
                                                          coherence=SORTED_AFRESH_OR_KEPT)),
     "own.bvh": Entry("own.bvh:LinearBvh", Roles(tuned=True, structured=True, bench_row="own.bvh",
                                                 coherence=SORTED_AFRESH_OR_KEPT)),
     "own.verlet": Entry("own.verlet:VerletList", Roles(tuned=True, structured=True, bench_row="own.verlet")),
+    "own.brute": Entry("own.brute:Brute", Roles(bench_row="own.brute")),
     "own.grid_swept": Entry("own.swept:SweptGrid"),
     "own.sap_swept": Entry("own.swept:SweptSap"),
     "essay.sap": Entry("own.essay.sap:EssaySweepAndPrune"),

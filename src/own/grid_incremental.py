@@ -22,30 +22,12 @@ import numba as nb
 import numpy as np
 
 from .common import PairCollector, centre_extents, emit, radius_of
-from .grid import (
-    CellLayout,
-    SquareGrid,
-    cell_key,
-    covered_cells,
-    gather_centres,
-    grid_layout,
-    key_space,
-    large_against_large,
-    small_limit,
-)
+from .grid import (CellLayout, SquareGrid, cell_key, covered_cells, gather_centres, grid_layout, key_space,
+                   large_against_large, small_limit)
 from .grid3d import CubesForSpheres
 from .grid_incremental3d import IncrementalCubes
-from .kept_lists import (
-    LAYOUT_SLACK_CELLS,
-    REBUILD_MOVERS_DIVISOR,
-    RENEW_AFTER_MOVES_PER_OBJECT,
-    add_candidate,
-    drop_moved,
-    link_runs,
-    move,
-    new_state,
-    unpack,
-)
+from .kept_lists import (LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT, add_candidate,
+                         drop_moved, link_runs, move, new_state, unpack)
 from .statics import StaticsApart
 
 # `candidates="auto"`: kept candidates pay only while they are few and few objects change cell.

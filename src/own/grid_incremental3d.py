@@ -20,17 +20,8 @@ import numpy as np
 
 from .common import PairCollector, one_radius, radius_of
 from .grid3d import NX, NY, NZ, SIDE, cube_key, cube_keys, cube_space, grid3_layout
-from .kept_lists import (
-    LAYOUT_SLACK_CELLS,
-    REBUILD_MOVERS_DIVISOR,
-    RENEW_AFTER_MOVES_PER_OBJECT,
-    add_candidate,
-    drop_moved,
-    link_runs,
-    move,
-    new_state,
-    unpack,
-)
+from .kept_lists import (LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT, add_candidate,
+                         drop_moved, link_runs, move, new_state, unpack)
 
 
 def cube_heads_length(layout: np.ndarray) -> int:

@@ -25,23 +25,10 @@ import numpy as np
 from .common import PairCollector, radius_of
 from .grid import cell_key, grid_layout, key_space, small_limit
 from .grid3d import CubesForSpheres
-from .grid_incremental import (
-    IncrementalSquares,
-    _boxes_overlap,
-    add_neighbours,
-    first_large_rank,
-    head_length,
-    incremental_rebuild,
-    large_pairs,
-)
-from .kept_lists import (
-    LAYOUT_SLACK_CELLS,
-    REBUILD_MOVERS_DIVISOR,
-    RENEW_AFTER_MOVES_PER_OBJECT,
-    drop_moved,
-    move,
-    unpack,
-)
+from .grid_incremental import (IncrementalSquares, _boxes_overlap, add_neighbours, first_large_rank, head_length,
+                               incremental_rebuild, large_pairs)
+from .kept_lists import (LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT, drop_moved, move,
+                         unpack)
 from .parallel import chunk_count
 
 # Default `parallel_from`, in objects: below it the frame runs on one thread, as in
