@@ -175,3 +175,28 @@ def test_physx_takes_statics_as_colliders_and_spawning_by_switching_collision(na
         assert backend.pairs().tolist() == []  # statics alone: no PhysX scene at all
     finally:
         backend.close()
+
+
+@pytest.mark.parametrize("static_rows", ["block", "scattered"])
+@pytest.mark.parametrize("mover", ["first", "middle", "last"])
+def test_a_static_that_moves_is_refused_wherever_it_lies_and_a_static_not_alive_may_move(static_rows, mover):
+    """The statics' check answers from one pass where they are a block of rows, from a search
+    where they are scattered: either way the static that moved is named, and one that is not
+    alive moves freely (recordings park absent objects anywhere)."""
+    n = 40
+    rng = np.random.default_rng(1)
+    positions, radii = rng.uniform(0.0, 100.0, (n, 2)), np.full(n, 2.0)
+    static = np.zeros(n, dtype=bool)
+    ids = np.arange(5, 25) if static_rows == "block" else np.arange(3, n, 2)
+    static[ids] = True
+    moved = ids[{"first": 0, "middle": len(ids) // 2, "last": -1}[mover]]
+    backend = engines.create("own.brute")
+    backend.reset(positions, radii, static=static)
+    after = positions.copy()
+    after[moved, 1] += 1e-9 * max(1.0, abs(after[moved, 1]))
+    with pytest.raises(ValueError, match=rf"object {moved} is static but moved"):
+        backend.update(after)
+    alive = np.ones(n, dtype=bool)
+    alive[moved] = False
+    backend.update(after, alive)  # not alive: no check
+    assert not ({int(moved)} & set(backend.pairs().ravel().tolist()))

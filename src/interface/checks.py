@@ -67,9 +67,16 @@ def _sum(values: FloatArray) -> float:
 
 @nb.njit(cache=True)
 def first_moved(positions: FloatArray, ids: np.ndarray, kept: FloatArray, alive: np.ndarray) -> int:
-    """The first of `ids` alive now (`alive`, empty: all) whose position differs from `kept`
-    (its row in `kept`), or -1: the check that statics stay where they were, every frame (20 us
-    for 50,000 statics)."""
+    """The first of `ids` (ascending) alive now (`alive`, empty: all) whose position differs from
+    `kept` (its row in `kept`), or -1: the check that statics stay where they were, every frame.
+    Where the statics are one block of rows (statics first, as scenes and engines number them),
+    a branch-free pass over the block answers first: 6.9 us against 16.0 for the search alone
+    at 6060 statics (a board of pegs), about what reading the two blocks takes; the search for
+    which one moved, and whether it is alive, runs only where something differs."""
+    if ids.shape[0] == 0:
+        return -1
+    if ids[ids.shape[0] - 1] - ids[0] + 1 == ids.shape[0] and not _block_differs(positions, ids[0], kept):
+        return -1
     everyone = alive.shape[0] == 0
     for a in range(ids.shape[0]):
         i = ids[a]
@@ -79,6 +86,18 @@ def first_moved(positions: FloatArray, ids: np.ndarray, kept: FloatArray, alive:
             if positions[i, d] != kept[a, d]:
                 return a
     return -1
+
+
+@nb.njit(cache=True, inline="always")
+def _block_differs(positions: FloatArray, first: int, kept: FloatArray) -> bool:
+    """Whether rows first.. of `positions` differ anywhere from `kept` (as many rows): one flat,
+    branch-free pass that the compiler vectorises."""
+    flat, home = positions.reshape(positions.size), kept.reshape(kept.size)
+    start = first * positions.shape[1]
+    differs = False
+    for t in range(home.shape[0]):
+        differs |= flat[start + t] != home[t]
+    return differs
 
 
 def check_radii(radii: object, n: int) -> FloatArray:
