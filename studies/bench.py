@@ -38,7 +38,7 @@ import numpy as np
 
 import engines
 from interface.pairs import keys
-from own.bvh import morton_codes, morton_codes3
+from own.bvh import morton_codes
 from own.floor import FLOOR_KERNELS
 from own.parallel import threading_layer, threads
 from scenes.generate import at_essay_density
@@ -106,7 +106,7 @@ def tight_loop(backend: str, traj: Trajectory, seconds: float, **params) -> tupl
 
 def spatial_order(positions: np.ndarray) -> np.ndarray:
     """A numbering of the objects along a Morton curve through their centres."""
-    codes = morton_codes(positions) if positions.shape[1] == 2 else morton_codes3(positions)
+    codes = morton_codes(positions)
     return np.argsort(codes, kind="stable")
 
 

@@ -13,7 +13,8 @@ objects' boxes, and pairs are found by traversing the tree against itself (own/t
 a grid, nothing depends on a cell size: mixed sizes cost little.
 
 Over spheres the centres are quantised to a 2^16 lattice on each axis of a cube and their three
-coordinates interleaved into 48-bit codes; the radix tree over them is the same (own/tree3d.py).
+coordinates interleaved into 48-bit codes; the radix tree over them is the same, every kernel
+compiled for each dimension from one source (own/dimension.py).
 """
 
 from __future__ import annotations
@@ -24,50 +25,57 @@ import numpy as np
 from interface.knobs import Knob, fixed
 
 from .coherent import box_frame
-from .morton import interleave, interleave3
+from .dimension import marker
+from .morton import STEP_BITS, interleave, pack_steps
 from .small import SmallScenes
 from .statics import StaticsApart
 from .tree import MortonTree, add_children, build_tree, new_table, split_at_highest_bit
-from .tree3d import build_tree3, cube_frame
 from .tree_search import END, START
 
 MORTON_BITS = 16  # per axis: 2^16 lattice steps over the lattice square
 
 
 @nb.njit(cache=True)
-def centre_codes(xy, sr, x0, y0, size, depth, codes):
-    """Into `codes`: the Morton code of each centre on the 2^depth x 2^depth lattice over the
-    square (x0, y0, size); all 0 where the square is a point or its scale overflows. (A key
-    kernel of own/tree.py: the radii `sr` are not needed.) Two passes, the lattice steps packed
-    into `codes` first: each pass vectorises, where one loop doing both did not (3x slower)."""
+def centre_codes(centres, sr, frame, depth, codes, dim):
+    """Into `codes`: the Morton code of each centre on the lattice of 2^depth steps a side over the
+    square (cube) `frame` (corner, then side); all 0 where it is a point or its scale overflows.
+    (A key kernel of own/tree.py: the radii `sr` are not needed.) Two passes, the lattice steps
+    packed into `codes` first: each pass vectorises, where one loop doing both did not (3x slower
+    over circles)."""
+    d = len(dim)
     top = float((1 << depth) - 1)
+    size = frame[d]
     scale = (top + 1.0) / size if size > 0 else 0.0
     if not (scale > 0 and np.isfinite(scale)):
         codes[:] = 0
         return
-    for i in range(xy.shape[0]):
-        qx = np.int64(min(max((xy[i, 0] - x0) * scale, 0.0), top))
-        qy = np.int64(min(max((xy[i, 1] - y0) * scale, 0.0), top))
-        codes[i] = np.uint64(qx | (qy << 32))
-    for i in range(xy.shape[0]):
-        c = codes[i]
-        codes[i] = interleave(c & np.uint64(0xFFFFFFFF), c >> np.uint64(32))
+    for i in range(centres.shape[0]):
+        codes[i] = pack_steps(centres, i, frame, scale, top, STEP_BITS[d], dim)
+    for i in range(centres.shape[0]):
+        codes[i] = interleave(codes[i], dim)
+
+
+def morton_codes(positions: np.ndarray) -> np.ndarray:
+    """The Morton code of each centre (MORTON_BITS per axis) on the lattice over the centres'
+    square (cube): 32-bit codes over circles, 48-bit over spheres."""
+    return _morton_codes(np.ascontiguousarray(positions, dtype=np.float64), marker(positions.shape[1]))
 
 
 @nb.njit(cache=True)
-def morton_codes(positions: np.ndarray) -> np.ndarray:
-    """32-bit Morton code of each centre on the lattice over the centres' square."""
+def _morton_codes(positions, dim):
     n = positions.shape[0]
     codes, points = np.zeros(n, dtype=np.uint64), np.zeros(n)  # centres as boxes of radius 0
-    x0, y0, size = box_frame(positions, points)
-    centre_codes(positions, points, x0, y0, size, MORTON_BITS, codes)
+    frame = np.zeros(len(dim) + 1)
+    box_frame(positions, points, frame, dim)
+    centre_codes(positions, points, frame, MORTON_BITS, codes, dim)
     return codes
 
 
 @nb.njit(cache=True)
-def bvh_nodes(codes, depth, leaf_size):
+def bvh_nodes(codes, depth, leaf_size, dim):
     """The binary radix tree over the sorted codes (a node kernel of own/tree.py), depth first:
-    nodes close in the sorted order are close in memory, as the traversal visits them."""
+    nodes close in the sorted order are close in memory, as the traversal visits them. The same
+    in every dimension (`dim` unused: a node kernel's signature)."""
     n = codes.shape[0]
     nodes = new_table(n)
     if n == 0:
@@ -89,44 +97,10 @@ def bvh_nodes(codes, depth, leaf_size):
 
 
 @nb.njit(cache=True)
-def bvh_build(positions, radii, last_order, order, work, box, frame, repair, depth, capacity):
+def bvh_build(positions, radii, last_order, order, work, box, frame, repair, depth, capacity, dim):
     """own/tree.py's build_tree with the radix tree's kernels."""
     return build_tree(centre_codes, bvh_nodes, positions, radii, last_order, order, work, box, frame, repair,
-                      depth, capacity)
-
-
-@nb.njit(cache=True)
-def centre_codes3(xyz, sr, x0, y0, z0, size, depth, codes):
-    """centre_codes over spheres: the Morton code of each centre on the 2^depth lattice over the
-    cube (x0, y0, z0, size), three coordinates interleaved (depth <= 21); all 0 where the cube is a
-    point or its scale overflows."""
-    top = float((1 << depth) - 1)
-    scale = (top + 1.0) / size if size > 0 else 0.0
-    if not (scale > 0 and np.isfinite(scale)):
-        codes[:] = 0
-        return
-    for i in range(xyz.shape[0]):
-        qx = np.int64(min(max((xyz[i, 0] - x0) * scale, 0.0), top))
-        qy = np.int64(min(max((xyz[i, 1] - y0) * scale, 0.0), top))
-        qz = np.int64(min(max((xyz[i, 2] - z0) * scale, 0.0), top))
-        codes[i] = interleave3(qx, qy, qz)
-
-
-@nb.njit(cache=True)
-def bvh_build3(positions, radii, last_order, order, work, box, frame, repair, depth, capacity):
-    """bvh_build over spheres (own/tree3d.py's build_tree3)."""
-    return build_tree3(centre_codes3, bvh_nodes, positions, radii, last_order, order, work, box, frame, repair,
-                       depth, capacity)
-
-
-@nb.njit(cache=True)
-def morton_codes3(positions: np.ndarray) -> np.ndarray:
-    """morton_codes over spheres: 48-bit codes of the centres on the lattice over their cube."""
-    n = positions.shape[0]
-    codes, points = np.zeros(n, dtype=np.uint64), np.zeros(n)
-    x0, y0, z0, size = cube_frame(positions, points)
-    centre_codes3(positions, points, x0, y0, z0, size, MORTON_BITS, codes)
-    return codes
+                      depth, capacity, dim)
 
 
 class LinearBvh(StaticsApart, SmallScenes, MortonTree):
@@ -143,7 +117,6 @@ class LinearBvh(StaticsApart, SmallScenes, MortonTree):
     defaults = {"leaf_size": 16, "coherent": True}
     sweeps = (Knob("leaf_size", fixed([1, 2, 4, 8, 16, 32]), "objects per leaf"),)
     build = staticmethod(bvh_build)
-    build3 = staticmethod(bvh_build3)
 
     def __init__(self, **params):
         super().__init__(**params)
@@ -151,7 +124,8 @@ class LinearBvh(StaticsApart, SmallScenes, MortonTree):
         self._depth = MORTON_BITS
 
     def structure(self):
-        return {"nodes": self._bounds.copy()}
+        """Each node's box, its lows then its highs ((x0, y0, x1, y1) over circles)."""
+        return {"nodes": np.hstack([self._bounds[:, 0::2], self._bounds[:, 1::2]])}
 
     def validate(self):
         self._validate_tree(lambda s, e: e - s <= self._capacity)

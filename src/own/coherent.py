@@ -26,41 +26,59 @@ FRAME_SLACK = 1.0 / 16
 
 
 @nb.njit(cache=True)
-def box_frame(positions, radii):
-    """(x0, y0, size): the square around all boxes; size is 0 when it is a point or overflows."""
-    n = positions.shape[0]
-    if n == 0:
-        return 0.0, 0.0, 0.0
-    x0, y0 = np.inf, np.inf
-    x1, y1 = -np.inf, -np.inf
-    for i in range(n):
-        x, y, r = positions[i, 0], positions[i, 1], radii[i]
-        x0, x1 = min(x0, x - r), max(x1, x + r)
-        y0, y1 = min(y0, y - r), max(y1, y + r)
+def box_frame(centres, radii, frame, dim):
+    """Into `frame`: the lowest corner of the boxes (frame[:d]) and the side of the square (cube)
+    around them all (frame[d]), 0 where that is a point or overflows. One pass over the objects,
+    every axis at once (a pass per axis read them d times: at n = 2^20 they come from memory)."""
+    d = len(dim)
+    x0 = y0 = z0 = np.inf
+    x1 = y1 = z1 = -np.inf
+    for i in range(centres.shape[0]):
+        r = radii[i]
+        x0, x1 = min(x0, centres[i, 0] - r), max(x1, centres[i, 0] + r)
+        y0, y1 = min(y0, centres[i, 1] - r), max(y1, centres[i, 1] + r)
+        if d == 3:  # known when compiled: no test in the loop over circles
+            z0, z1 = min(z0, centres[i, 2] - r), max(z1, centres[i, 2] + r)
     size = max(x1 - x0, y1 - y0)
-    return x0, y0, (size if np.isfinite(size) else 0.0)
+    if d == 3:
+        size = max(size, z1 - z0)
+    frame[0], frame[1] = x0, y0
+    if d == 3:
+        frame[2] = z0
+    frame[d] = size if centres.shape[0] and np.isfinite(size) else 0.0
+    if not centres.shape[0]:
+        frame[:d] = 0.0
 
 
 @nb.njit(cache=True)
-def lattice_frame(xy, sr, last):
-    """The lattice square (x0, y0, size) for this frame: last frame's (`last`, size 0 before the
-    first) while every box still lies inside it and the boxes span at least half of it, else the
-    square around the boxes widened by FRAME_SLACK of its size on every side. A square that stays
-    put keeps every key of an object that stays in its cell, so last frame's order needs little
-    repair; one fitted afresh every frame shifts the whole lattice whenever the outermost object
-    moves (measured on the settled pile at n = 65536: the quadtree's repair gave up every frame)."""
-    x0, y0, size = box_frame(xy, sr)
-    lx0, ly0, lsize = last[0], last[1], last[2]
-    if lsize > 0 and x0 >= lx0 and y0 >= ly0 and x0 + size <= lx0 + lsize and y0 + size <= ly0 + lsize \
-            and size >= 0.5 * lsize:
-        return lx0, ly0, lsize
+def lattice_frame(centres, sr, frame, dim):
+    """The lattice square (cube) for this frame, in `frame` (corner, then side; side 0 before the
+    first): kept while every box still lies inside it and the boxes span at least half of it,
+    else the square around the boxes widened by FRAME_SLACK of its side on every side. A square
+    that stays put keeps every key of an object that stays in its cell, so last frame's order
+    needs little repair; one fitted afresh every frame shifts the whole lattice whenever the
+    outermost object moves (measured on the settled pile at n = 65536: the quadtree's repair gave
+    up every frame)."""
+    d = len(dim)
+    last = frame.copy()
+    box_frame(centres, sr, frame, dim)
+    size, last_size = frame[d], last[d]
+    if last_size > 0 and size >= 0.5 * last_size:
+        inside = True
+        for a in range(d):
+            inside &= (frame[a] >= last[a]) & (frame[a] + size <= last[a] + last_size)
+        if inside:
+            frame[:] = last
+            return
     if size == 0:
-        return x0, y0, size
+        return
     slack = FRAME_SLACK * size
     wider = size + 2.0 * slack
     if not np.isfinite(wider):
-        return x0, y0, size
-    return x0 - slack, y0 - slack, wider
+        return
+    for a in range(d):
+        frame[a] -= slack
+    frame[d] = wider
 
 
 @nb.njit(cache=True)

@@ -22,7 +22,7 @@ drifting apart. Sorted into cells afresh every frame instead, it took 1.2 to 1.7
 tumbler, smash and the moving pile (n = 4096 and 65536), and the same on the level.
 
 Over spheres it is the loose octree: the lattice is a cube, a cell's code has three bits a level
-(depth at most 19), and the same node kernel splits it (`loose_nodes(3)`; own/tree3d.py).
+(depth at most 19), and the same kernels, compiled for spheres (own/dimension.py), key and split it.
 """
 
 from __future__ import annotations
@@ -32,137 +32,94 @@ import numpy as np
 
 from interface.knobs import Knob, fixed
 
-from .morton import bit_length, interleave, interleave3
+from .morton import STEP_BITS, bit_length, interleave, pack_steps
 from .small import SmallScenes
 from .statics import StaticsApart
 from .tree import MortonTree, add_children, build_tree, new_table, split_at_highest_bit
-from .tree3d import build_tree3
 from .tree_search import END, START
 
-# Keys are (Morton code of the cell, padded to depth D) << LEVEL_BITS | depth: 2 D + 5 bits.
+# Keys are (Morton code of the cell, padded to depth D) << LEVEL_BITS | depth: d D + 5 bits.
 LEVEL_BITS = 5
 LEVEL_MASK = (1 << LEVEL_BITS) - 1
 MAX_DEPTH = 26  # 2 * 26 + 5 = 57 key bits; 2^26 cells per side is finer than any scene needs
-STEP_MASK = (1 << MAX_DEPTH) - 1
+MAX_DEPTH_3D = 19  # over spheres three code bits a level: 3 * 19 + 5 = 62
+DEEPEST = (0, 0, MAX_DEPTH, MAX_DEPTH_3D)  # by dimension: also the bits of each step as loose_keys packs them
 
 
 @nb.njit(cache=True)
-def quadtree_keys(xy, sr, x0, y0, size, depth, keys):
+def loose_keys(centres, sr, frame, depth, keys, dim):
     """Into `keys`: each object's cell (Morton code at depth `depth`) and that cell's depth: the
-    deepest whose cells are at least as wide as the object's box, in which its centre lies (a key
-    kernel of own/tree.py). Two passes, the lattice steps and the depth packed into `keys` first
-    (26 bits each and 5): each pass vectorises, where one loop doing both did not."""
+    deepest whose cells are at least as wide as the object's box, in which its centre lies, on the
+    lattice over the square (cube) `frame` (a key kernel of own/tree.py). Two passes, the lattice
+    steps and the depth packed into `keys` first (DEEPEST[d] bits a step, then the depth): each
+    pass vectorises, where one loop doing both did not."""
+    d = len(dim)
+    bits = DEEPEST[d]
     cells = float(1 << depth)
+    size = frame[d]
     scale = cells / size if size > 0 else 0.0
     if not (scale > 0 and np.isfinite(scale)):
         keys[:] = 0  # one cell: everything stays in the root
         return
     top = cells - 1.0
-    for a in range(xy.shape[0]):
-        qx = np.int64(min(max((xy[a, 0] - x0) * scale, 0.0), top))
-        qy = np.int64(min(max((xy[a, 1] - y0) * scale, 0.0), top))
+    level_at = np.uint64(d * bits)
+    for a in range(centres.shape[0]):
         # The box spans `steps` lattice steps: it fits a cell of 2^k steps from k = bit_length(steps - 1).
         steps = np.int64(np.ceil(min(2.0 * sr[a] * scale, cells)))
         level = depth - bit_length(max(steps, 1) - 1)
-        keys[a] = np.uint64(qx | (qy << 26) | (level << 52))
-    for a in range(xy.shape[0]):
+        keys[a] = pack_steps(centres, a, frame, scale, top, bits, dim) | (np.uint64(level) << level_at)
+    step_mask = np.uint64((1 << bits) - 1)
+    for a in range(centres.shape[0]):
         packed = keys[a]
-        level = packed >> np.uint64(52)
+        level = packed >> level_at
         mask = ~((np.uint64(1) << (np.uint64(depth) - level)) - np.uint64(1))
-        qx, qy = packed & np.uint64(STEP_MASK) & mask, (packed >> np.uint64(26)) & np.uint64(STEP_MASK) & mask
-        keys[a] = (interleave(qx, qy) << np.uint64(LEVEL_BITS)) | level
-
-
-def loose_nodes(dim: int):
-    """The node kernel of a loose tree whose cells split in 2^dim (own/tree.py): 2 for the
-    quadtree, 3 for the octree (keys of dim * depth code bits, then the level)."""
-
-    @nb.njit(cache=True)
-    def nodes_of(keys, depth, capacity):
-        """The node table over the sorted keys, depth first (a node kernel of own/tree.py)."""
-        n = keys.shape[0]
-        nodes = new_table(n)
-        if n == 0:
-            return nodes
-        count = 1
-        pending = np.empty(4 * MAX_DEPTH + 8, dtype=np.int64)  # nodes still to split: about one per level
-        pending[0] = 0
-        top = 1
-        level_bits = np.uint64(LEVEL_BITS)
-        while top > 0:
-            top -= 1
-            k = pending[top]
-            s, e = nodes[k, START], nodes[k, END]
-            if e - s <= capacity:
-                continue
-            # The slice's codes share their first `shared` of dim * D bits: it lies in one cell of
-            # that many bits, and its objects of depth shared / dim or less (they sort first) are its own.
-            shared = dim * depth - bit_length((keys[s] >> level_bits) ^ (keys[e - 1] >> level_bits))
-            stay = s
-            while stay < e and dim * int(keys[stay] & np.uint64(LEVEL_MASK)) <= shared:
-                stay += 1
-            if stay == e:
-                continue  # a leaf: every object is its own (or all share one cell of the deepest level)
-            if top + 2 > pending.shape[0]:
-                pending = np.concatenate((pending, np.empty_like(pending)))
-            pending[top], pending[top + 1] = count + 1, count  # the left subtree first
-            top += 2
-            count = add_children(nodes, count, k, stay if stay > s else split_at_highest_bit(keys, s, e))
-        return nodes[:count]
-
-    return nodes_of
-
-
-quadtree_nodes = loose_nodes(2)
+        cell = np.uint64(0)
+        for axis in range(d):  # each step cut to its cell, repacked as interleave takes them
+            cell |= ((packed >> np.uint64(axis * bits)) & step_mask & mask) << np.uint64(axis * STEP_BITS[d])
+        keys[a] = (interleave(cell, dim) << np.uint64(LEVEL_BITS)) | level
 
 
 @nb.njit(cache=True)
-def quadtree_build(positions, radii, last_order, order, work, box, frame, repair, depth, capacity):
-    """own/tree.py's build_tree with the loose quadtree's kernels."""
-    return build_tree(quadtree_keys, quadtree_nodes, positions, radii, last_order, order, work, box, frame, repair,
-                      depth, capacity)
-
-# Over spheres: three code bits a level, 3 D + 5 key bits.
-MAX_DEPTH_3D = 19
-STEP_MASK_3D = (1 << MAX_DEPTH_3D) - 1
-
-
-@nb.njit(cache=True)
-def octree_keys(xyz, sr, x0, y0, z0, size, depth, keys):
-    """quadtree_keys over spheres: each object's cell of the lattice over the cube (x0, y0, z0,
-    size), the deepest whose cells are at least as wide as its box, as a 3D Morton code and depth."""
-    cells = float(1 << depth)
-    scale = cells / size if size > 0 else 0.0
-    if not (scale > 0 and np.isfinite(scale)):
-        keys[:] = 0
-        return
-    top = cells - 1.0
-    for a in range(xyz.shape[0]):
-        qx = np.int64(min(max((xyz[a, 0] - x0) * scale, 0.0), top))
-        qy = np.int64(min(max((xyz[a, 1] - y0) * scale, 0.0), top))
-        qz = np.int64(min(max((xyz[a, 2] - z0) * scale, 0.0), top))
-        steps = np.int64(np.ceil(min(2.0 * sr[a] * scale, cells)))
-        level = depth - bit_length(max(steps, 1) - 1)
-        keys[a] = np.uint64(qx | (qy << 19) | (qz << 38) | (level << 57))
-    for a in range(xyz.shape[0]):
-        packed = keys[a]
-        level = packed >> np.uint64(57)
-        mask = ~((np.uint64(1) << (np.uint64(depth) - level)) - np.uint64(1))
-        step_mask = np.uint64(STEP_MASK_3D)
-        qx = packed & step_mask & mask
-        qy = (packed >> np.uint64(19)) & step_mask & mask
-        qz = (packed >> np.uint64(38)) & step_mask & mask
-        keys[a] = (interleave3(qx, qy, qz) << np.uint64(LEVEL_BITS)) | level
-
-
-octree_nodes = loose_nodes(3)
+def loose_nodes(keys, depth, capacity, dim):
+    """The node table of a loose tree whose cells split in 2^d (the quadtree, the octree) over the
+    sorted keys (d * depth code bits, then the level), depth first (a node kernel of own/tree.py)."""
+    d = len(dim)
+    n = keys.shape[0]
+    nodes = new_table(n)
+    if n == 0:
+        return nodes
+    count = 1
+    pending = np.empty(4 * MAX_DEPTH + 8, dtype=np.int64)  # nodes still to split: about one per level
+    pending[0] = 0
+    top = 1
+    level_bits = np.uint64(LEVEL_BITS)
+    while top > 0:
+        top -= 1
+        k = pending[top]
+        s, e = nodes[k, START], nodes[k, END]
+        if e - s <= capacity:
+            continue
+        # The slice's codes share their first `shared` of d * D bits: it lies in one cell of
+        # that many bits, and its objects of depth shared / d or less (they sort first) are its own.
+        shared = d * depth - bit_length((keys[s] >> level_bits) ^ (keys[e - 1] >> level_bits))
+        stay = s
+        while stay < e and d * int(keys[stay] & np.uint64(LEVEL_MASK)) <= shared:
+            stay += 1
+        if stay == e:
+            continue  # a leaf: every object is its own (or all share one cell of the deepest level)
+        if top + 2 > pending.shape[0]:
+            pending = np.concatenate((pending, np.empty_like(pending)))
+        pending[top], pending[top + 1] = count + 1, count  # the left subtree first
+        top += 2
+        count = add_children(nodes, count, k, stay if stay > s else split_at_highest_bit(keys, s, e))
+    return nodes[:count]
 
 
 @nb.njit(cache=True)
-def octree_build(positions, radii, last_order, order, work, box, frame, repair, depth, capacity):
-    """quadtree_build over spheres (own/tree3d.py's build_tree3)."""
-    return build_tree3(octree_keys, octree_nodes, positions, radii, last_order, order, work, box, frame, repair,
-                       depth, capacity)
+def quadtree_build(positions, radii, last_order, order, work, box, frame, repair, depth, capacity, dim):
+    """own/tree.py's build_tree with the loose tree's kernels (a quadtree, an octree over spheres)."""
+    return build_tree(loose_keys, loose_nodes, positions, radii, last_order, order, work, box, frame, repair,
+                      depth, capacity, dim)
 
 
 class Quadtree(StaticsApart, SmallScenes, MortonTree):
@@ -183,7 +140,6 @@ class Quadtree(StaticsApart, SmallScenes, MortonTree):
               Knob("max_depth", fixed([4, 6, 8, 10, 12, 16, 24]), "maximum depth"))
     method = "tree"
     build = staticmethod(quadtree_build)
-    build3 = staticmethod(octree_build)
 
     def __init__(self, **params):
         super().__init__(**params)

@@ -11,10 +11,11 @@ from interface.knobs import Knob, fixed
 
 from .coherent import RepairSchedule
 from .common import PairCollector, emit, gather, insertion_sort
+from .dimension import CIRCLES, marker
 from .parallel import ChunkedPairCollector
 from .radix import radix_argsort, sortable_bits
 from .sap3d import Sweep3
-from .skin import FILTER_KERNELS, STEP_KERNELS, SkinSchedule
+from .skin import SkinSchedule, filter_pairs, largest_step
 from .small import SmallScenes
 from .statics import StaticsApart
 from .strips import strip_plan, strip_prepare, strip_sweep, strip_sweep_parallel
@@ -84,7 +85,7 @@ def sap_prepare(positions, radii, axis_mode, last_order, incremental, order, wor
     other = 1 - axis
     swaps = -1
     if incremental and n > 0 and last_order[n] == axis:
-        gather(positions, radii, last_order[:n], xy, sr)
+        gather(positions, radii, last_order[:n], xy, sr, CIRCLES)
         for a in range(n):
             keys[a] = xy[a, axis] - sr[a]
             perm[a] = a
@@ -96,7 +97,7 @@ def sap_prepare(positions, radii, axis_mode, last_order, incremental, order, wor
         for i in range(n):
             keys[i] = positions[i, axis] - radii[i]
         order[:n] = radix_argsort(sortable_bits(keys))
-        gather(positions, radii, order[:n], xy, sr)
+        gather(positions, radii, order[:n], xy, sr, CIRCLES)
         for a in range(n):
             perm[a] = a
     order[n] = axis  # remember the axis the order belongs to
@@ -321,7 +322,7 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
     def _reset(self, positions, radii):
         if self.dim == 3 and (self.params["sweep"] == "sparse" or self.params["parallel"]):
             raise ValueError(f"{self.name}: sweep='sparse' and parallel are not taken over spheres yet")
-        self._largest_step, self._filter = STEP_KERNELS[self.dim], FILTER_KERNELS[self.dim]
+        self._dim = marker(self.dim)
         self._adapts = self.params["skin"] is None
         if self._built and self._adapts:
             # Built anew in a run, for the objects that appeared or went: the last sweep's pairs
@@ -397,7 +398,7 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
     def _update(self, positions):
         self._positions = positions
         self._since += 1
-        if self._skin > 0.0 and self._largest_step(positions, self._anchor) <= 0.5 * self._skin:
+        if self._skin > 0.0 and largest_step(positions, self._anchor, self._dim) <= 0.5 * self._skin:
             self._stats = {**self._stats, "reused": 1}
             return
         if self._adapts:
@@ -477,7 +478,7 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
             return out
         if self._kept is None:  # the frame of the build: the grown boxes' pairs, kept
             self._kept = self._sweep_pairs().copy()
-        out, _ = self._filter_collect(self._filter, self._kept, self._positions, self.radii)
+        out, _ = self._filter_collect(filter_pairs, self._kept, self._positions, self.radii, self._dim)
         self._overlapping = len(out)
         self._stats["kept"] = len(self._kept)
         return out
@@ -516,7 +517,8 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
 
     def validate(self):
         if self._skin > 0.0:
-            assert self._largest_step(self._positions, self._anchor) <= 0.5 * self._skin, "an object outran the skin"
+            step = largest_step(self._positions, self._anchor, self._dim)
+            assert step <= 0.5 * self._skin, "an object outran the skin"
         if self._sweep3 is not None:
             self._sweep3.validate()
             return

@@ -42,54 +42,30 @@ SHRINK_GAIN, GROW_MARGIN, MIN_SHARE = 10.0, 6.0, 0.125
 
 
 @nb.njit(cache=True)
-def largest_step(positions, built):
-    """The largest displacement of any object along either axis since `built`."""
+def largest_step(positions, built, dim):
+    """The largest displacement of any object along any axis since `built` (`dim`: the
+    dimension's marker, own/dimension.py)."""
     step = 0.0
     for i in range(positions.shape[0]):
-        step = max(step, abs(positions[i, 0] - built[i, 0]), abs(positions[i, 1] - built[i, 1]))
+        for a in range(len(dim)):
+            step = max(step, abs(positions[i, a] - built[i, a]))
     return step
 
 
 @nb.njit(cache=True)
-def filter_pairs(candidates, positions, radii, buf):
+def filter_pairs(candidates, positions, radii, dim, buf):
     """The candidates whose boxes overlap now (closed intervals), in the list's order."""
     count = 0
     for k in range(candidates.shape[0]):
         i, j = candidates[k, 0], candidates[k, 1]
         reach = radii[i] + radii[j]
-        if abs(positions[i, 0] - positions[j, 0]) <= reach and abs(positions[i, 1] - positions[j, 1]) <= reach:
+        meet = True
+        for a in range(len(dim)):
+            meet &= abs(positions[i, a] - positions[j, a]) <= reach
+        if meet:
             emit(buf, count, i, j)
             count += 1
     return (count,)
-
-
-@nb.njit(cache=True)
-def largest_step3(positions, built):
-    """largest_step over spheres: along any of the three axes."""
-    step = 0.0
-    for i in range(positions.shape[0]):
-        step = max(step, abs(positions[i, 0] - built[i, 0]), abs(positions[i, 1] - built[i, 1]),
-                   abs(positions[i, 2] - built[i, 2]))
-    return step
-
-
-@nb.njit(cache=True)
-def filter_pairs3(candidates, positions, radii, buf):
-    """filter_pairs over spheres: the boxes compared on all three axes."""
-    count = 0
-    for k in range(candidates.shape[0]):
-        i, j = candidates[k, 0], candidates[k, 1]
-        reach = radii[i] + radii[j]
-        if abs(positions[i, 0] - positions[j, 0]) <= reach and abs(positions[i, 1] - positions[j, 1]) <= reach \
-                and abs(positions[i, 2] - positions[j, 2]) <= reach:
-            emit(buf, count, i, j)
-            count += 1
-    return (count,)
-
-
-# The kernels per dimension (compiled apart, so that the circles' stay as they were).
-STEP_KERNELS = {2: largest_step, 3: largest_step3}
-FILTER_KERNELS = {2: filter_pairs, 3: filter_pairs3}
 
 
 class SkinSchedule:

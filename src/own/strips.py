@@ -21,6 +21,7 @@ import numba as nb
 import numpy as np
 
 from .common import emit, gather
+from .dimension import CIRCLES
 
 # Strips pay once the plain sweep would test at least this many pairs per object, and the strips
 # cut that at least in half (estimated from the extents and radii).
@@ -107,7 +108,7 @@ def strip_prepare(positions, radii, plan, last_order, incremental, order, work, 
     xy, sr, keys, perm = work
     swaps = -1
     if incremental and last_order[n] == axis + 2:
-        gather(positions, radii, last_order[:n], xy, sr)
+        gather(positions, radii, last_order[:n], xy, sr, CIRCLES)
         if not _slot_strips(xy, sr, axis, base, inv_height, last, strip_of, keys, perm):
             return -2
         swaps = _repair(strip_of, keys, perm, MAX_SWAPS_PER_OBJECT * n + 64)
@@ -128,7 +129,7 @@ def strip_prepare(positions, radii, plan, last_order, incremental, order, work, 
             q = min((positions[i, axis] - r - s0) * scale, top)
             quant[i] = np.uint64(k) * np.uint64(cols) + np.uint64(q)
         source = counting_argsort(quant, strips * cols)
-        gather(positions, radii, source, xy, sr)
+        gather(positions, radii, source, xy, sr, CIRCLES)
         if not _slot_strips(xy, sr, axis, base, inv_height, last, strip_of, keys, perm):
             return -2
         _repair(strip_of, keys, perm, n * n + 64)

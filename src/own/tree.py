@@ -26,16 +26,15 @@ from __future__ import annotations
 
 import numba as nb
 import numpy as np
-from numba.cpython.unsafe.numbers import trailing_zeros
 
 from interface.base import BroadPhase
 
 from .coherent import RepairSchedule, lattice_frame, resort
-from .common import PairCollector, gather, meet_mask, scan_mask
+from .common import PairCollector, gather
+from .dimension import marker
 from .morton import bit_length
-from .skin import SkinSchedule, filter_pairs, filter_pairs3, largest_step, largest_step3
-from .tree3d import refit3, tree_pairs3
-from .tree_search import CHILD, END, NO_CHILD, START, search_tree
+from .skin import SkinSchedule, filter_pairs, largest_step
+from .tree_search import CHILD, END, NO_CHILD, START, tree_bounds, tree_pairs
 
 # The skin a tree starts with, and the most it grows to, in mean diameters (own/skin.py), as the
 # Verlet list's.
@@ -54,9 +53,10 @@ REFIT_RETRY = 8
 
 
 @nb.njit(cache=True, inline="always")
-def set_box(box, a, x, y, r):
-    """Slot a of `box` (rows lx, hx, ly, hy): the box of the circle (x, y, r)."""
-    box[0, a], box[1, a], box[2, a], box[3, a] = x - r, x + r, y - r, y + r
+def set_box(box, a, centres, j, r, dim):
+    """Slot a of `box` (rows lo, hi of each axis): the box of object j of `centres`, radius r."""
+    for axis in range(len(dim)):
+        box[2 * axis, a], box[2 * axis + 1, a] = centres[j, axis] - r, centres[j, axis] + r
 
 
 # How a tree's kernels reach its build and search: each tree has one cached module-level function
@@ -69,40 +69,39 @@ def set_box(box, a, x, y, r):
 
 @nb.njit(inline="always")
 def build_tree(key_kernel, node_kernel, positions, radii, last_order, order, work, box, frame, repair, depth,
-               capacity):
-    """This frame's sorted order into `order` and the boxes in that order into `box` (rows lx, hx,
-    ly, hy); returns the node table, the node bounds (x0, y0, x1, y1) and the insertion-sort swaps
-    (-1 after a sort from scratch). `key_kernel(xy, sr, x0, y0, size, depth, keys)` writes each
-    object's key on the lattice square (x0, y0, size), `node_kernel(keys, depth, capacity)` builds
-    the node table over the sorted keys. The objects are taken in last frame's order
+               capacity, dim):
+    """This frame's sorted order into `order` and the boxes in that order into `box` (rows lo, hi
+    of each axis); returns the node table, the node bounds and the insertion-sort swaps (-1 after a
+    sort from scratch). `key_kernel(centres, sr, frame, depth, keys, dim)` writes each object's key
+    on the lattice square (cube) `frame` (corner, then side), `node_kernel(keys, depth, capacity,
+    dim)` builds the node table over the sorted keys. The objects are taken in last frame's order
     (`last_order`, its first entry -1 before the first frame), where their keys are almost sorted
     (own/coherent.py); `work` (centres, radii, keys, permutation) is the caller's, reused from
-    frame to frame, and so is `frame`, the lattice square, updated in place. (Not cached itself:
-    its kernels are part of its signature, see above.)"""
+    frame to frame, and so is `frame`, updated in place. `dim`: the dimension's marker
+    (own/dimension.py). (Not cached itself: its kernels are part of its signature, see above.)"""
     n = positions.shape[0]
-    xy, sr, keys, perm = work
+    centres, sr, keys, perm = work
     fresh = n == 0 or last_order[0] < 0
-    gather(positions, radii, np.arange(n) if fresh else last_order, xy, sr)
-    x0, y0, size = lattice_frame(xy, sr, frame)
-    frame[0], frame[1], frame[2] = x0, y0, size
-    key_kernel(xy, sr, x0, y0, size, depth, keys)
+    gather(positions, radii, np.arange(n) if fresh else last_order, centres, sr, dim)
+    lattice_frame(centres, sr, frame, dim)
+    key_kernel(centres, sr, frame, depth, keys, dim)
     swaps = resort(keys, perm, repair and not fresh)
     for a in range(n):  # perm is almost the identity: near-sequential reads
         j = perm[a]
         order[a] = j if fresh else last_order[j]
-        set_box(box, a, xy[j, 0], xy[j, 1], sr[j])
-    nodes = node_kernel(keys, depth, capacity)
-    return nodes, tree_bounds(nodes, box), swaps
+        set_box(box, a, centres, j, sr[j], dim)
+    nodes = node_kernel(keys, depth, capacity, dim)
+    return nodes, tree_bounds(nodes, box, dim), swaps
 
 
 @nb.njit(cache=True)
-def refit(positions, radii, order, box, nodes):
+def refit(positions, radii, order, box, nodes, dim):
     """This frame's boxes in the kept order into `box`, and the bounds over them of the same node
     table: the tree keeps its leaves, wherever their objects have gone."""
     for a in range(order.shape[0]):
         j = order[a]
-        set_box(box, a, positions[j, 0], positions[j, 1], radii[j])
-    return tree_bounds(nodes, box)
+        set_box(box, a, positions, j, radii[j], dim)
+    return tree_bounds(nodes, box, dim)
 
 
 @nb.njit(cache=True, inline="always")
@@ -144,61 +143,6 @@ def add_children(nodes, count, k, mid):
     return count + 2
 
 
-@nb.njit(cache=True)
-def tree_bounds(nodes, box):
-    """Each node's bounds (x0, y0, x1, y1): the exact union of the boxes below it. Children come
-    after their parent, so a backward pass has them ready."""
-    bounds = np.empty((nodes.shape[0], 4))
-    for k in range(nodes.shape[0] - 1, -1, -1):
-        if nodes[k, CHILD] == NO_CHILD:
-            x0, y0, x1, y1 = np.inf, np.inf, -np.inf, -np.inf
-            for a in range(nodes[k, START], nodes[k, END]):
-                x0, x1 = min(x0, box[0, a]), max(x1, box[1, a])
-                y0, y1 = min(y0, box[2, a]), max(y1, box[3, a])
-        else:
-            u, v = nodes[k, CHILD], nodes[k, CHILD] + 1
-            x0, y0 = min(bounds[u, 0], bounds[v, 0]), min(bounds[u, 1], bounds[v, 1])
-            x1, y1 = max(bounds[u, 2], bounds[v, 2]), max(bounds[u, 3], bounds[v, 3])
-        bounds[k, 0], bounds[k, 1], bounds[k, 2], bounds[k, 3] = x0, y0, x1, y1
-    return bounds
-
-
-@nb.njit(cache=True, inline="always")
-def _meet(bounds, u, v):
-    return (bounds[u, 0] <= bounds[v, 2]) & (bounds[u, 2] >= bounds[v, 0]) & \
-        (bounds[u, 1] <= bounds[v, 3]) & (bounds[u, 3] >= bounds[v, 1])
-
-
-@nb.njit(cache=True, inline="always")
-def _leaf_self(order, box, s, e, buf, count):
-    """Pairs among the objects of one leaf."""
-    for a in range(s, e):
-        count = scan_mask(box, order, a, a + 1, e, buf, count)
-    return count
-
-
-@nb.njit(cache=True, inline="always")
-def _leaf_cross(order, box, bounds, nodes, u, v, buf, count):
-    """Pairs between the objects of leaves u and v, whose bounds overlap: each of u's objects
-    that meets v's bounds (where leaves touch along an edge, a few) is scanned against all of v's
-    (measured faster than also picking v's objects that meet u's bounds: the scans vectorise).
-    u's objects are picked 64 at a time into a bit mask, branch-free."""
-    s, e = nodes[v, START], nodes[v, END]
-    us, ue = nodes[u, START], nodes[u, END]
-    for c in range(us, ue, 64):
-        mask = meet_mask(box, c, min(64, ue - c), bounds[v, 0], bounds[v, 2], bounds[v, 1], bounds[v, 3])
-        while mask:
-            count = scan_mask(box, order, c + trailing_zeros(mask), s, e, buf, count)
-            mask &= mask - np.uint64(1)
-    return count
-
-
-@nb.njit(cache=True)
-def tree_pairs(order, box, nodes, bounds, buf):
-    """search_tree over circles."""
-    return search_tree(_meet, _leaf_self, _leaf_cross, order, box, nodes, bounds, buf)
-
-
 class MortonTree(BroadPhase):
     """A tree over Morton-sorted objects, built anew from last frame's order when an object has
     moved past its skin. Where the skin dropped to zero, it keeps its leaves and refits their
@@ -206,26 +150,19 @@ class MortonTree(BroadPhase):
     the first refit, it builds REFIT_RETRY frames before trying again). A subclass sets `build`
     (a cached caller of build_tree with its kernels), `_depth` and `_capacity`, and has a
     `coherent` parameter: False sorts from the input order and builds every frame, to measure what
-    coherence saves. Over spheres the tree is the same with `build3` (a caller of
-    tree3d.build_tree3) and own/tree3d.py's primitives."""
+    coherence saves. Over spheres the tree is the same, every kernel handed the dimension's marker
+    (own/dimension.py) and compiled for it."""
 
     build = None
-    build3 = None
 
     def __init__(self, **params):
         super().__init__(**params)
         self._collect = PairCollector()
         self._keep = PairCollector()  # the kept pairs, apart from the buffers a frame's pairs are handed back in
 
-    def _kernels(self):
-        """(build, refit, pair search, skin rule, kept-pair filter) for the dimension worked in."""
-        if self.dim == 3:
-            return self.build3, refit3, tree_pairs3, largest_step3, filter_pairs3
-        return self.build, refit, tree_pairs, largest_step, filter_pairs
-
     def _reset(self, positions, radii):
         n, dim = self.n, self.dim
-        self._build_kernel, self._refit_kernel, self._search, self._largest_step, self._filter = self._kernels()
+        self._dim = marker(dim)
         # The order is double-buffered (the repair reads last frame's while it writes this
         # frame's); -1 first: none yet. Every work array is kept between frames.
         self._order, self._spare_order = np.full(n, -1, dtype=np.int64), np.empty(n, dtype=np.int64)
@@ -251,7 +188,7 @@ class MortonTree(BroadPhase):
     def _update(self, positions):
         self._positions = positions
         self._since += 1
-        if self._skin > 0.0 and self._largest_step(positions, self._anchor) <= 0.5 * self._skin:
+        if self._skin > 0.0 and largest_step(positions, self._anchor, self._dim) <= 0.5 * self._skin:
             self._stats = {**self._stats, "reused": 1}
             return
         if self.params["coherent"]:
@@ -268,7 +205,7 @@ class MortonTree(BroadPhase):
         """This frame's exact boxes in the tree of the last build (at skin zero): its order and
         leaves kept, their bounds refitted."""
         self._positions = positions
-        self._bounds = self._refit_kernel(positions, self.radii, self._order, self._box, self._nodes)
+        self._bounds = refit(positions, self.radii, self._order, self._box, self._nodes, self._dim)
         self._since, self._refits, self._refitted = 0, self._refits + 1, self._refitted + 1
         self._stats = {**self._stats, "refits": self._refits, "reused": 0}
 
@@ -280,9 +217,9 @@ class MortonTree(BroadPhase):
             self._lattice[:] = 0.0  # and a lattice fitted to this frame alone
         repair = self._schedule.due(self._order[:1].min(initial=0) >= 0)
         radii = self.radii + 0.5 * self._skin if self._skin > 0.0 else self.radii
-        self._nodes, self._bounds, swaps = self._build_kernel(
+        self._nodes, self._bounds, swaps = self.build(
             positions, radii, self._order, self._spare_order, self._work, self._box, self._lattice, repair,
-            self._depth, self._capacity)
+            self._depth, self._capacity, self._dim)
         self._schedule.record(repair, swaps)
         self._order, self._spare_order = self._spare_order, self._order
         self._since, self._builds, self._kept = 0, self._builds + 1, None
@@ -293,7 +230,7 @@ class MortonTree(BroadPhase):
 
     def _pairs(self):
         if self._skin == 0.0:
-            out, (visited,) = self._collect(self._search, self._order, self._box, self._nodes, self._bounds)
+            out, (visited,) = self._collect(tree_pairs, self._order, self._box, self._nodes, self._bounds, self._dim)
             self._stats["visited"] = visited
             if not self._refitted:
                 self._visited_at_build = visited
@@ -304,9 +241,9 @@ class MortonTree(BroadPhase):
                     self._refit_wait = REFIT_RETRY
             return out
         if self._kept is None:  # the frame of the build: the grown boxes' pairs, kept
-            self._kept, (self._stats["visited"],) = self._keep(self._search, self._order, self._box, self._nodes,
-                                                               self._bounds)
-        out, _ = self._collect(self._filter, self._kept, self._positions, self.radii)
+            self._kept, (self._stats["visited"],) = self._keep(tree_pairs, self._order, self._box, self._nodes,
+                                                               self._bounds, self._dim)
+        out, _ = self._collect(filter_pairs, self._kept, self._positions, self.radii, self._dim)
         self._overlapping = len(out)
         self._stats["kept"] = len(self._kept)
         return out
@@ -316,7 +253,8 @@ class MortonTree(BroadPhase):
         may hold what it holds."""
         n, nodes, bounds, box, dim = self.n, self._nodes, self._bounds, self._box, self.dim
         if self._skin > 0.0:
-            assert self._largest_step(self._positions, self._anchor) <= 0.5 * self._skin, "an object outran the skin"
+            step = largest_step(self._positions, self._anchor, self._dim)
+            assert step <= 0.5 * self._skin, "an object outran the skin"
         assert np.array_equal(np.sort(self._order), np.arange(n)), "sort order is not a permutation"
         keys = self._work[2]
         assert (keys[1:] >= keys[:-1]).all(), "keys are not sorted"
@@ -324,8 +262,9 @@ class MortonTree(BroadPhase):
         for k, (s, e, child) in enumerate(nodes):
             assert 0 <= s < e <= n, f"node {k}: its slice is empty or out of range"
             inside = box[:, s:e]
-            for a in range(dim):  # bounds: the lows then the highs; box rows: low and high per axis
-                assert (bounds[k, a] <= inside[2 * a]).all() and (bounds[k, dim + a] >= inside[2 * a + 1]).all(), \
+            for a in range(dim):  # bounds and box rows alike: low and high per axis
+                assert (bounds[k, 2 * a] <= inside[2 * a]).all() \
+                    and (bounds[k, 2 * a + 1] >= inside[2 * a + 1]).all(), \
                     f"node {k} misses a box on {'xyz'[a]}"
             if child == NO_CHILD:
                 assert capacity_ok(s, e), f"leaf {k} holds {e - s} objects although it could split"

@@ -1,11 +1,19 @@
-"""The node table every tree of ours shares, and its traversal against itself: one generic body
-that each dimension's box primitives turn into a compiled pair search (own/tree.py over circles,
-own/tree3d.py over spheres)."""
+"""The node table every tree of ours shares, its bounds, and its traversal against itself: written
+once over the axes, compiled for circles and for spheres by the dimension's marker
+(own/dimension.py).
+
+Boxes are kept by column, rows lo and hi of each axis (lx, hx, ly, hy[, lz, hz]), and a node's
+bounds in the same order, one row a node (bounds[k]), so that a box and a node's bounds are
+tested by the one primitive (common.meet_mask).
+"""
 
 from __future__ import annotations
 
 import numba as nb
 import numpy as np
+from numba.cpython.unsafe.numbers import trailing_zeros
+
+from .common import meet_mask, scan_mask
 
 # A node's row: its objects' run in the order (START, END) and its first child (NO_CHILD: a leaf;
 # the second child follows the first).
@@ -13,12 +21,63 @@ START, END, CHILD = range(3)
 NO_CHILD = -1
 
 
-@nb.njit(inline="always")
-def search_tree(meet, leaf_self, leaf_cross, order, box, nodes, bounds, buf):
+@nb.njit(cache=True)
+def tree_bounds(nodes, box, dim):
+    """Each node's bounds (lx, hx, ly, hy[, lz, hz]): the exact union of the boxes below it.
+    Children come after their parent, so a backward pass has them ready."""
+    d = len(dim)
+    bounds = np.empty((nodes.shape[0], 2 * d))
+    for k in range(nodes.shape[0] - 1, -1, -1):
+        if nodes[k, CHILD] == NO_CHILD:
+            s, e = nodes[k, START], nodes[k, END]
+            for axis in range(d):
+                lo, hi = np.inf, -np.inf
+                for a in range(s, e):
+                    lo, hi = min(lo, box[2 * axis, a]), max(hi, box[2 * axis + 1, a])
+                bounds[k, 2 * axis], bounds[k, 2 * axis + 1] = lo, hi
+        else:
+            u, v = nodes[k, CHILD], nodes[k, CHILD] + 1
+            for axis in range(d):
+                bounds[k, 2 * axis] = min(bounds[u, 2 * axis], bounds[v, 2 * axis])
+                bounds[k, 2 * axis + 1] = max(bounds[u, 2 * axis + 1], bounds[v, 2 * axis + 1])
+    return bounds
+
+
+@nb.njit(cache=True, inline="always")
+def _meet(bounds, u, v, dim):
+    hit = True
+    for axis in range(len(dim)):
+        hit &= (bounds[u, 2 * axis] <= bounds[v, 2 * axis + 1]) & (bounds[u, 2 * axis + 1] >= bounds[v, 2 * axis])
+    return hit
+
+
+@nb.njit(cache=True, inline="always")
+def _leaf_self(order, box, s, e, buf, count, dim):
+    """Pairs among the objects of one leaf."""
+    for a in range(s, e):
+        count = scan_mask(box, order, a, a + 1, e, buf, count, dim)
+    return count
+
+
+@nb.njit(cache=True, inline="always")
+def _leaf_cross(order, box, bounds, nodes, u, v, buf, count, dim):
+    """Pairs between the objects of leaves u and v, whose bounds overlap: each of u's objects
+    that meets v's bounds (where leaves touch along an edge, a few) is scanned against all of v's
+    (measured faster than also picking v's objects that meet u's bounds: the scans vectorise).
+    u's objects are picked 64 at a time into a bit mask, branch-free."""
+    s, e = nodes[v, START], nodes[v, END]
+    us, ue = nodes[u, START], nodes[u, END]
+    for c in range(us, ue, 64):
+        mask = meet_mask(box, c, min(64, ue - c), bounds[v], dim)
+        while mask:
+            count = scan_mask(box, order, c + trailing_zeros(mask), s, e, buf, count, dim)
+            mask &= mask - np.uint64(1)
+    return count
+
+
+@nb.njit(cache=True)
+def tree_pairs(order, box, nodes, bounds, dim, buf):
     """Box-overlap pairs of a tree into buf, each once; returns (pairs found, node pairs visited).
-    The box primitives make it a search over circles (own/tree.py) or spheres (own/tree3d.py):
-    `meet(bounds, u, v)`, whether two nodes' bounds meet, `leaf_self` and `leaf_cross`, the pairs
-    within a leaf and between two leaves. (Not cached itself, as build_tree.)
 
     Simultaneous traversal: a node is paired with itself (its children with themselves and
     with each other) and two overlapping nodes with each other (both split into their four
@@ -43,24 +102,24 @@ def search_tree(meet, leaf_self, leaf_cross, order, box, nodes, bounds, buf):
         if u == v:
             left = nodes[u, CHILD]
             if left == NO_CHILD:
-                count = leaf_self(order, box, nodes[u, START], nodes[u, END], buf, count)
+                count = _leaf_self(order, box, nodes[u, START], nodes[u, END], buf, count, dim)
                 continue
             stack[top, 0], stack[top, 1] = left, left
             stack[top + 1, 0], stack[top + 1, 1] = left + 1, left + 1
             top += 2
-            if meet(bounds, left, left + 1):
+            if _meet(bounds, left, left + 1, dim):
                 stack[top, 0], stack[top, 1] = left, left + 1
                 top += 1
             continue
         u_leaf, v_leaf = nodes[u, CHILD] == NO_CHILD, nodes[v, CHILD] == NO_CHILD
         if u_leaf and v_leaf:
-            count = leaf_cross(order, box, bounds, nodes, u, v, buf, count)
+            count = _leaf_cross(order, box, bounds, nodes, u, v, buf, count, dim)
             continue
         if not u_leaf and not v_leaf:
             u_left, v_left = nodes[u, CHILD], nodes[v, CHILD]
             for u_child in (u_left, u_left + 1):
                 for v_child in (v_left, v_left + 1):
-                    if meet(bounds, u_child, v_child):
+                    if _meet(bounds, u_child, v_child, dim):
                         stack[top, 0], stack[top, 1] = u_child, v_child
                         top += 1
             continue
@@ -68,7 +127,7 @@ def search_tree(meet, leaf_self, leaf_cross, order, box, nodes, bounds, buf):
             u, v = v, u
         left = nodes[u, CHILD]
         for child in (left, left + 1):
-            if meet(bounds, child, v):
+            if _meet(bounds, child, v, dim):
                 stack[top, 0], stack[top, 1] = child, v
                 top += 1
     return count, visited

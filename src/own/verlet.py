@@ -25,8 +25,9 @@ from interface.checks import shown
 from interface.knobs import Knob, fixed, mean_diameter, sizes
 
 from .common import PairCollector
+from .dimension import marker
 from .grid import UniformGrid
-from .skin import FILTER_KERNELS, STEP_KERNELS, SkinSchedule
+from .skin import SkinSchedule, filter_pairs, largest_step
 from .statics import StaticsApart
 
 PRECISIONS = ("float64", "float32")
@@ -73,7 +74,7 @@ class VerletList(StaticsApart, BroadPhase):
         return values
 
     def _reset(self, positions, radii):
-        self._largest_step, self._filter = STEP_KERNELS[self.dim], FILTER_KERNELS[self.dim]
+        self._dim = marker(self.dim)
         self._radii = self._rounded(radii)
         positive = self._radii[self._radii > 0]
         default = DEFAULT_SKIN_DIAMETERS * 2.0 * float(positive.mean()) if len(positive) else 1.0
@@ -115,7 +116,8 @@ class VerletList(StaticsApart, BroadPhase):
         positions = self._rounded(positions)
         self._since += 1
         every = self.params["every"]
-        due = (self._since >= every) if every is not None else self._largest_step(positions, self._anchor) > 0.5 * self._skin
+        due = (self._since >= every) if every is not None \
+            else largest_step(positions, self._anchor, self._dim) > 0.5 * self._skin
         if due:
             if self._adapts:
                 self._skin = self._schedule.next(self._since, len(self._list), self._overlapping, len(positions))
@@ -129,11 +131,12 @@ class VerletList(StaticsApart, BroadPhase):
         if self.params["fat"] or (self._skin == 0.0 and self._since == 0):  # the list is this frame's pairs
             self._overlapping = len(self._list)
             return self._list.copy()
-        out, _ = self._collect(self._filter, self._list, self._positions, self._radii)
+        out, _ = self._collect(filter_pairs, self._list, self._positions, self._radii, self._dim)
         self._overlapping = len(out)
         return out
 
     def validate(self):
         """While the rule holds, the list holds every current overlap."""
         if self.params["every"] is None:
-            assert self._largest_step(self._positions, self._anchor) <= 0.5 * self._skin, "an object outran the skin"
+            step = largest_step(self._positions, self._anchor, self._dim)
+            assert step <= 0.5 * self._skin, "an object outran the skin"
