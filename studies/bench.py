@@ -39,7 +39,8 @@ import numpy as np
 import engines
 from interface.pairs import keys
 from own.bvh import morton_codes
-from own.floor import FLOOR_KERNELS
+from own.dimension import marker
+from own.floor import floor_frame
 from own.parallel import threading_layer, threads
 from scenes.generate import at_essay_density
 from scenes.motion import Trajectory, simulate
@@ -126,15 +127,15 @@ def _trajectory(dist: str, n: int, frames: int, dim: int = 2) -> Trajectory:
 
 def floor_ms(traj: Trajectory, seconds: float) -> float:
     """The floor's median ms per frame (own/floor.py) in its fastest pass, timed like the backends."""
-    floor_frame = FLOOR_KERNELS[traj.scene.dim]
+    dim = marker(traj.scene.dim)
     out = np.empty((max(len(p) for p in traj.box_pairs[1:]), 2), dtype=np.int64)
-    floor_frame(traj.positions[1], traj.box_pairs[1], out)  # compile
+    floor_frame(traj.positions[1], traj.box_pairs[1], out, dim)  # compile
     medians, start = [], time.perf_counter()
     while len(medians) < MIN_PASSES or time.perf_counter() - start < seconds:
         times = []
         for f in range(1, traj.frames):
             t0 = time.perf_counter()
-            floor_frame(traj.positions[f], traj.box_pairs[f], out)
+            floor_frame(traj.positions[f], traj.box_pairs[f], out, dim)
             times.append(time.perf_counter() - t0)
         medians.append(float(np.median(times)))
     return min(medians) * 1e3

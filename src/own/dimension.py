@@ -17,7 +17,8 @@ and hands it to its kernels; it does not test the dimension itself.
 from __future__ import annotations
 
 MARKERS: dict[int, tuple[int, ...]] = {2: (0, 0), 3: (0, 0, 0)}
-CIRCLES = MARKERS[2]  # for kernels of one dimension only (a compiled caller takes it as a constant)
+# For kernels written for one dimension only, a compiled caller takes them as constants.
+CIRCLES, SPHERES = MARKERS[2], MARKERS[3]
 
 
 def marker(dim: int) -> tuple[int, ...]:

@@ -14,27 +14,14 @@ import numpy as np
 
 
 @nb.njit(cache=True)
-def floor_frame(positions: np.ndarray, truth: np.ndarray, out: np.ndarray) -> float:
-    """Read every centre once, write every true pair once; returns the centres' sum."""
+def floor_frame(positions: np.ndarray, truth: np.ndarray, out: np.ndarray, dim) -> float:
+    """Read every centre once, write every true pair once; returns the centres' sum (`dim`: the
+    dimension's marker, own/dimension.py)."""
     total = 0.0
     for i in range(positions.shape[0]):
-        total += positions[i, 0] + positions[i, 1]
+        for axis in range(len(dim)):
+            total += positions[i, axis]
     for k in range(truth.shape[0]):
         out[k, 0] = truth[k, 0]
         out[k, 1] = truth[k, 1]
     return total
-
-
-@nb.njit(cache=True)
-def floor_frame3(positions: np.ndarray, truth: np.ndarray, out: np.ndarray) -> float:
-    """floor_frame over spheres: the three coordinates of every centre read."""
-    total = 0.0
-    for i in range(positions.shape[0]):
-        total += positions[i, 0] + positions[i, 1] + positions[i, 2]
-    for k in range(truth.shape[0]):
-        out[k, 0] = truth[k, 0]
-        out[k, 1] = truth[k, 1]
-    return total
-
-
-FLOOR_KERNELS = {2: floor_frame, 3: floor_frame3}  # compiled apart, so that the circles' floor is as it was

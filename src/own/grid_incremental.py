@@ -22,12 +22,13 @@ import numba as nb
 import numpy as np
 
 from .common import PairCollector, centre_extents, emit, radius_of
+from .dimension import CIRCLES
 from .grid import (CellLayout, SquareGrid, cell_key, covered_cells, gather_centres, grid_layout, key_space,
                    large_against_large, small_limit)
 from .grid3d import CubesForSpheres
 from .grid_incremental3d import IncrementalCubes
 from .kept_lists import (LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT, add_candidate,
-                         drop_moved, link_runs, move, new_state, unpack)
+                         boxes_overlap, drop_moved, link_runs, move, new_state, unpack)
 from .statics import StaticsApart
 
 # `candidates="auto"`: kept candidates pay only while they are few and few objects change cell.
@@ -189,15 +190,6 @@ def incremental_step(positions, radii, radius, p, cell, max_cells, layout, state
     return limit, incremental_rebuild(positions, radii, layout, limit, state, head, cand), n, True
 
 
-@nb.njit(cache=True, inline="always")
-def _boxes_overlap(xy, sr, a, b):
-    """Whether the boxes of ranks a and b overlap (bounds x - r, x + r, as everywhere); `sr`, the
-    radii by rank or their one radius."""
-    x, y, r = xy[a, 0], xy[a, 1], radius_of(sr, a)
-    u, v, s = xy[b, 0], xy[b, 1], radius_of(sr, b)
-    return (max(x - r, u - s) <= min(x + r, u + s)) & (max(y - r, v - s) <= min(y + r, v + s))
-
-
 @nb.njit(cache=True)
 def incremental_pairs(state, radius, head, cand, m, layout, limit, buf):
     """Box-overlap pairs into buf: the candidates tested, then the large objects found afresh.
@@ -208,13 +200,14 @@ def incremental_pairs(state, radius, head, cand, m, layout, limit, buf):
     if m <= rows:  # a row for every candidate (the caller asks for them): no check per row, 1.1x faster at n = 2048
         for t in range(m):  # branch-free: every candidate is written at row `count`, a hit kept
             a, b = cand[t, 0], cand[t, 1]
-            hit = _boxes_overlap(xy, radius, a, b)  # loaded before the store, which the compiler cannot move them past
+            # Loaded before the store, which the compiler cannot move them past.
+            hit = boxes_overlap(xy, radius, a, b, CIRCLES)
             buf[count, 0], buf[count, 1] = a, b
             count += hit
     else:  # kept for a buffer with fewer rows: returning early instead made frames 2-8% slower
         for t in range(m):
             a, b = cand[t, 0], cand[t, 1]
-            hit = _boxes_overlap(xy, radius, a, b)
+            hit = boxes_overlap(xy, radius, a, b, CIRCLES)
             if count < rows:
                 buf[count, 0], buf[count, 1] = a, b
             count += hit
@@ -253,7 +246,7 @@ def large_pairs(state, head, layout, limit, buf, count, tests):
                 b = head[cy * w + cx + 1 + w]
                 while b >= 0:
                     emit(buf, count, perm[a], perm[b])
-                    count += _boxes_overlap(xy, sr, a, b)
+                    count += boxes_overlap(xy, sr, a, b, CIRCLES)
                     tests += 1
                     b = nxt[b]
     return large_against_large(xy, sr, perm, first_large, perm.shape[0], buf, count, tests)

@@ -18,10 +18,11 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .common import PairCollector, one_radius, radius_of
+from .common import PairCollector, one_radius
+from .dimension import SPHERES
 from .grid3d import NX, NY, NZ, SIDE, cube_key, cube_keys, cube_space, grid3_layout
 from .kept_lists import (LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT, add_candidate,
-                         drop_moved, link_runs, move, new_state, unpack)
+                         boxes_overlap, drop_moved, link_runs, move, new_state, unpack)
 
 
 def cube_heads_length(layout: np.ndarray) -> int:
@@ -134,15 +135,6 @@ def update3(positions, layout, state, head, cand, m, movers, moved, max_movers):
     return m, k
 
 
-@nb.njit(cache=True, inline="always")
-def _boxes_overlap3(xyz, sr, a, b):
-    """Whether the boxes of ranks a and b overlap; `sr`, the radii by rank or their one radius."""
-    x, y, z, r = xyz[a, 0], xyz[a, 1], xyz[a, 2], radius_of(sr, a)
-    u, v, t, s = xyz[b, 0], xyz[b, 1], xyz[b, 2], radius_of(sr, b)
-    return (max(x - r, u - s) <= min(x + r, u + s)) & (max(y - r, v - s) <= min(y + r, v + s)) \
-        & (max(z - r, t - s) <= min(z + r, t + s))
-
-
 @nb.njit(cache=True)
 def pairs3(state, radius, cand, m, buf):
     """Box-overlap pairs of the candidates into buf, as object ids; returns (pairs found, pair
@@ -152,13 +144,13 @@ def pairs3(state, radius, cand, m, buf):
     if m <= buf.shape[0]:
         for t in range(m):
             a, b = cand[t, 0], cand[t, 1]
-            hit = _boxes_overlap3(xyz, radius, a, b)
+            hit = boxes_overlap(xyz, radius, a, b, SPHERES)
             buf[count, 0], buf[count, 1] = a, b
             count += hit
     else:
         for t in range(m):
             a, b = cand[t, 0], cand[t, 1]
-            hit = _boxes_overlap3(xyz, radius, a, b)
+            hit = boxes_overlap(xyz, radius, a, b, SPHERES)
             if count < buf.shape[0]:
                 buf[count, 0], buf[count, 1] = a, b
             count += hit

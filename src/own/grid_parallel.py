@@ -23,12 +23,13 @@ import numba as nb
 import numpy as np
 
 from .common import PairCollector, radius_of
+from .dimension import CIRCLES
 from .grid import cell_key, grid_layout, key_space, small_limit
 from .grid3d import CubesForSpheres
-from .grid_incremental import (IncrementalSquares, _boxes_overlap, add_neighbours, first_large_rank, head_length,
-                               incremental_rebuild, large_pairs)
-from .kept_lists import (LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT, drop_moved, move,
-                         unpack)
+from .grid_incremental import (IncrementalSquares, add_neighbours, first_large_rank, head_length, incremental_rebuild,
+                               large_pairs)
+from .kept_lists import (LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT, boxes_overlap,
+                         drop_moved, move, unpack)
 from .parallel import chunk_count
 
 # Default `parallel_from`, in objects: below it the frame runs on one thread, as in
@@ -165,7 +166,7 @@ def chunked_pairs(state, radius, cand, counts, hits, found, buf):
         k = 0
         for t in range(counts[c]):  # branch-free, as in incremental_pairs
             a, b = cand[c, t, 0], cand[c, t, 1]
-            hit = _boxes_overlap(xy, radius, a, b)
+            hit = boxes_overlap(xy, radius, a, b, CIRCLES)
             hits[c, k, 0], hits[c, k, 1] = a, b
             k += hit
         for h in range(k):  # ranks to objects

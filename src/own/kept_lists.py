@@ -9,6 +9,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from .common import radius_of
+
 # A frame with more objects changing cell than n / this rebuilds: past that, listing every
 # mover's neighbours and dropping their old candidates (a pass over all of them) costs more than
 # enumerating the candidates afresh. Once rebuilds listed candidates from ranges (0.49 to 0.056 ms
@@ -104,3 +106,15 @@ def new_state(n: int, dim: int = 2) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     arrays, not eight, since each array handed to a compiled call costs about 60 ns to unpack (a
     few percent of a frame at n = 2048)."""
     return np.empty((6, n), dtype=np.int64), np.empty((n, dim)), np.empty(n)
+
+
+@nb.njit(cache=True, inline="always")
+def boxes_overlap(centres, sr, a, b, dim):
+    """Whether the boxes of ranks a and b overlap (bounds x - r, x + r, as everywhere); `sr`, the
+    radii by rank or their one radius; `dim`, the dimension's marker (own/dimension.py)."""
+    r, s = radius_of(sr, a), radius_of(sr, b)
+    hit = True
+    for axis in range(len(dim)):
+        x, u = centres[a, axis], centres[b, axis]
+        hit &= max(x - r, u - s) <= min(x + r, u + s)
+    return hit
