@@ -11,7 +11,9 @@ kind between dimensions (a stencil of cells, a bit interleave) is picked the sam
 marker's type, with `numba.extending.overload`.
 
 A structure takes its marker at reset, from the dimension the interface found there (`self.dim`),
-and hands it to its kernels; it does not test the dimension itself.
+and hands it to its kernels, which then hold no test of the dimension of their own. (The grids'
+cubes and the sweep's columns over spheres, own/grid3d.py, own/grid_incremental3d.py and
+own/sap3d.py, are still written per dimension.)
 """
 
 from __future__ import annotations
