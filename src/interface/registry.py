@@ -2,9 +2,9 @@
 
 Importing is lazy, so a missing engine package only makes its own backends unavailable, with the
 reason and the line that installs it kept for `--list`. What a study needs to know about a backend
-comes from here (its family: kind, package, install line, colour) or from its class (what it
-reports, its parameters and their sweep values, its kind of structure): adding an engine is one
-adapter module, one entry in BACKENDS (with its roles in the studies, for ours), and its family in
+comes from here (its family: kind, package, install line, colour; for ours, its roles in the
+studies) or from its class (what it reports, its parameters and their sweep values, its kind of
+structure): adding an engine is one adapter module, one entry in BACKENDS, and its family in
 FAMILIES.
 """
 
@@ -76,6 +76,7 @@ FAMILIES: dict[str, Family] = {f.name: f for f in [
     Family("vesin", "particle", "vesin's neighbour list", "magenta", ("vesin==0.6.2",)),
     Family("sklearn", "particle", "scikit-learn's trees", "darkorchid", ("scikit-learn==1.9.1",)),
 ]}
+
 
 @dataclass(frozen=True)
 class Roles:
@@ -183,11 +184,15 @@ def family(name: str) -> Family:
     return FAMILIES[prefix]
 
 
-def roles(name: str) -> Roles:
-    """The backend's roles in the studies (none for an engine's)."""
+def _entry(name: str) -> Entry:
     if name not in BACKENDS:
         raise ValueError(f"unknown backend {name!r}; known: {', '.join(BACKENDS)}")
-    return BACKENDS[name].roles
+    return BACKENDS[name]
+
+
+def roles(name: str) -> Roles:
+    """The backend's roles in the studies (none for an engine's)."""
+    return _entry(name).roles
 
 
 def with_role(role: str) -> list[str]:
@@ -224,8 +229,7 @@ def _load(name: str) -> type[BroadPhase] | str:
 
 
 def backend_class(name: str) -> type[BroadPhase]:
-    if name not in BACKENDS:
-        raise ValueError(f"unknown backend {name!r}; known: {', '.join(BACKENDS)}")
+    _entry(name)  # an unknown name is an error, not a reason it is unavailable
     loaded = _load(name)
     if isinstance(loaded, str):
         raise ValueError(f"backend {name!r} is not available here ({loaded}); install it with: "

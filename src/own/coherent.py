@@ -31,6 +31,9 @@ def box_frame(centres, radii, frame, dim):
     around them all (frame[d]), 0 where that is a point or overflows. One pass over the objects,
     every axis at once (a pass per axis read them d times: at n = 2^20 they come from memory)."""
     d = len(dim)
+    if not centres.shape[0]:
+        frame[:] = 0.0
+        return
     x0 = y0 = z0 = np.inf
     x1 = y1 = z1 = -np.inf
     for i in range(centres.shape[0]):
@@ -40,14 +43,11 @@ def box_frame(centres, radii, frame, dim):
         if d == 3:  # known when compiled: no test in the loop over circles
             z0, z1 = min(z0, centres[i, 2] - r), max(z1, centres[i, 2] + r)
     size = max(x1 - x0, y1 - y0)
-    if d == 3:
-        size = max(size, z1 - z0)
     frame[0], frame[1] = x0, y0
     if d == 3:
+        size = max(size, z1 - z0)
         frame[2] = z0
-    frame[d] = size if centres.shape[0] and np.isfinite(size) else 0.0
-    if not centres.shape[0]:
-        frame[:d] = 0.0
+    frame[d] = size if np.isfinite(size) else 0.0
 
 
 @nb.njit(cache=True)
