@@ -149,11 +149,11 @@ def test_bad_input_is_a_one_line_error(tmp_path, capsys):
 
 def test_a_recommendation_for_spheres_tries_only_what_works_in_3d(tmp_path, capsys):
     assert recommend.main(["--n", "400", "--dim", "3", "--backends",
-                           "own.grid,own.sap_parallel,scipy.kdtree,box2d.v3",
+                           "own.grid,chipmunk.bbtree,scipy.kdtree,box2d.v3",
                            "--no-tune", "--time-limit", "20", "--frames", "2", "--repeat", "2",
                            "--out", str(tmp_path)]) == 0
     printed = capsys.readouterr().out
-    assert "not run in 3D, they work in 2D only: own.sap_parallel, box2d.v3" in printed
+    assert "not run in 3D, they work in 2D only: chipmunk.bbtree, box2d.v3" in printed
     assert "n = 400 spheres" in printed and "(by volume)" in printed and "resting contact" not in printed
     meta = json.loads((tmp_path / "meta.json").read_text())
     assert {e["backend"] for e in meta["entries"]} == {"own.grid", "scipy.kdtree"}

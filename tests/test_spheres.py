@@ -159,28 +159,23 @@ def test_our_grid_refuses_a_cell_over_spheres_in_one_line():
 
 
 def test_our_sweep_and_prune_works_in_3d_along_the_axis_asked():
-    assert {"own.sap", "own.sap_incremental"} <= set(SPHERE_BACKENDS) and "own.sap_parallel" not in SPHERE_BACKENDS
+    assert {"own.sap", "own.sap_incremental", "own.sap_parallel"} <= set(SPHERE_BACKENDS)
     rng = np.random.default_rng(4)
     positions, radii = rng.uniform(0, 100, (400, 3)), rng.uniform(1, 4, 400)
     positions[:, 2] *= 20  # spread along z most
-    for axis, expected in (("auto", 2), ("x", 0), ("y", 1)):
+    for axis, expected in (("auto", 2), ("x", 0), ("y", 1), ("z", 2)):
         sap = engines.create("own.sap_incremental", axis=axis, skin=0)  # no skin: every frame sorted
         sap.reset(positions, radii)
         sap.update(positions + 0.01)  # the order kept and repaired
         assert sap.stats()["axis"] == expected and sap.stats()["swaps"] >= 0
         np.testing.assert_array_equal(np.sort(keys(sap.pairs(), 400)), keys(brute_pairs(positions + 0.01, radii), 400))
-    with pytest.raises(ValueError, match=r"^own.sap: sweep='sparse' and parallel are not taken over spheres"):
-        engines.create("own.sap", sweep="sparse").reset(positions, radii)
 
 
-@pytest.mark.parametrize("strips", ["on", "off", "auto"])
-@settings(max_examples=40)
-@given(scene=sphere_scenes(), seed=st.integers(0, 2**16))
-def test_sweep_and_prune_in_columns_finds_exactly_the_box_overlaps(strips, scene, seed):
-    positions, radii = scene
+def _exact_while_moving(sap, positions, radii, seed):
+    """Steps a sweep (small scenes left to its structure) from rest to large steps, checking its
+    invariants and its pairs against brute force each frame; yields after each frame's check."""
     n = len(positions)
     rng = np.random.default_rng(seed)
-    sap = engines.create("own.sap_incremental", strips=strips)
     sap.small_scene_n = 0
     sap.reset(positions, radii)
     for step in (0.0, 0.5, 20.0):
@@ -188,6 +183,30 @@ def test_sweep_and_prune_in_columns_finds_exactly_the_box_overlaps(strips, scene
         sap.update(positions)
         sap.validate()
         np.testing.assert_array_equal(np.sort(keys(sap.pairs(), n)), keys(brute_pairs(positions, radii), n))
+        yield
+
+
+@pytest.mark.parametrize("name, params", [
+    ("own.sap", {"sweep": "sparse", "strips": "off"}),
+    ("own.sap", {"sweep": "plain", "strips": "off"}),
+    ("own.sap_parallel", {"parallel_from": 0, "sweep": "plain", "strips": "off"}),
+    ("own.sap_parallel", {"parallel_from": 0, "sweep": "sparse", "strips": "off"}),
+])
+@settings(max_examples=30)
+@given(scene=sphere_scenes(), seed=st.integers(0, 2**16))
+def test_the_sparse_and_parallel_sweeps_find_exactly_the_box_overlaps_of_spheres(name, params, scene, seed):
+    sap = engines.create(name, skin=0, **params)
+    for _ in _exact_while_moving(sap, *scene, seed):
+        assert sap.stats()["sparse_sweep"] == (params["sweep"] == "sparse")
+
+
+@pytest.mark.parametrize("strips", ["on", "off", "auto"])
+@settings(max_examples=40)
+@given(scene=sphere_scenes(), seed=st.integers(0, 2**16))
+def test_sweep_and_prune_in_columns_finds_exactly_the_box_overlaps(strips, scene, seed):
+    sap = engines.create("own.sap_incremental", strips=strips)
+    frames = list(_exact_while_moving(sap, *scene, seed))
+    assert len(frames) == 3
 
 
 def test_columns_make_the_3d_sweep_local_on_a_dense_scene():

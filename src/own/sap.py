@@ -4,23 +4,24 @@ from __future__ import annotations
 
 import numba as nb
 import numpy as np
+from numba.extending import overload
 
 from interface.base import BroadPhase
 from interface.checks import shown
 from interface.knobs import Knob, fixed
 
 from .coherent import RepairSchedule
+from .columns import COLUMN_PAD, COLUMNS_FROM_WINDOW, column_prepare, column_sweep
 from .common import PairCollector, emit, gather, insertion_sort
-from .dimension import CIRCLES, marker
+from .dimension import marker
 from .parallel import ChunkedPairCollector
 from .radix import radix_argsort, sortable_bits
-from .sap3d import Sweep3
 from .skin import SkinSchedule, filter_pairs, largest_step
 from .small import SmallScenes
 from .statics import StaticsApart
 from .strips import strip_plan, strip_prepare, strip_sweep, strip_sweep_parallel
 
-AXES = ("x", "y", "auto", "z")  # "z": spheres only
+AXES = ("x", "y", "z", "auto")  # "z": spheres only
 SWEEPS = ("auto", "plain", "sparse")
 STRIPS = ("auto", "on", "off")
 # An insertion-sort repair that needs more swaps than this many per object gives up and sorts
@@ -54,40 +55,52 @@ SAP_SKIN_DIAMETERS, LARGEST_SAP_SKIN_DIAMETERS = 0.25, 1.0
 
 
 @nb.njit(cache=True)
-def _y_varies_more(positions: np.ndarray) -> bool:
-    n = positions.shape[0]
+def most_varied_axis(positions, dim) -> int:
+    """The axis along which the centres vary most, the lowest of equals (0 where none is finite:
+    the sums overflow). One pass for the means and one for the variances, every axis in each."""
+    n, d = positions.shape[0], len(dim)
     if n < 2:
-        return False
-    mean_x, mean_y = positions[:, 0].mean(), positions[:, 1].mean()
-    var_x = var_y = 0.0
+        return 0
+    mean, var = np.zeros(d), np.zeros(d)
     for i in range(n):
-        var_x += (positions[i, 0] - mean_x) ** 2
-        var_y += (positions[i, 1] - mean_y) ** 2
-    return var_y > var_x
+        for k in range(d):
+            mean[k] += positions[i, k]
+    mean /= n
+    for i in range(n):
+        for k in range(d):
+            var[k] += (positions[i, k] - mean[k]) ** 2
+    best, best_var = 0, -1.0
+    for k in range(d):
+        if var[k] > best_var:
+            best, best_var = k, var[k]
+    return best
 
 
 @nb.njit(cache=True)
-def sap_prepare(positions, radii, axis_mode, last_order, incremental, order, work, sorted_bounds, bounds32):
-    """Sort for this frame's sweep into `order` and `sorted_bounds` (s_lo, s_hi, o_lo, o_hi), and
-    into `bounds32` (o_lo, o_hi rounded to float32) unless it is empty.
+def sap_prepare(positions, radii, axis_mode, last_order, incremental, order, work, bounds, bounds32, dim):
+    """Sort for this frame's sweep into `order` and `bounds`, and into `bounds32` (the bounds on
+    the other axes rounded to float32) unless it is empty.
 
-    axis_mode: 0 x, 1 y, 2 largest variance. With `incremental`, `last_order` (last frame's, its
-    axis in its last entry, -1 before the first frame) is repaired by insertion sort when the axis
-    is unchanged, else the objects are sorted from scratch. `order` (n + 1), `work` (xy, radii,
-    keys, permutation) and `sorted_bounds` are the caller's, reused from frame to frame (fresh
+    `bounds` has 2 d rows: lo, hi along the sweep axis, then lo, hi along each other axis in turn
+    (axis + 1, axis + 2, modulo d), each in sorted order. axis_mode: the axis, or -1 for the one
+    along which the centres vary most. With `incremental`, `last_order` (last frame's, its axis
+    in its last entry, -1 before the first frame) is repaired by insertion sort when the axis is
+    unchanged, else the objects are sorted from scratch. `order` (n + 1), `work` (centres,
+    radii, keys, permutation) and `bounds` are the caller's, reused from frame to frame (fresh
     arrays cost a page fault per 4 KiB, at large n as much as the sort). Returns (axis, swaps);
     swaps is -1 after a full sort.
     """
-    n = positions.shape[0]
-    xy, sr, keys, perm = work
-    s_lo, s_hi, o_lo, o_hi = sorted_bounds
-    axis = axis_mode if axis_mode < 2 else (1 if _y_varies_more(positions) else 0)
-    other = 1 - axis
+    n, d = positions.shape[0], len(dim)
+    centres, sr, keys, perm = work
+    axis = axis_mode if axis_mode >= 0 else most_varied_axis(positions, dim)
+    others = np.empty(d - 1, dtype=np.int64)
+    for k in range(1, d):
+        others[k - 1] = (axis + k) % d
     swaps = -1
     if incremental and n > 0 and last_order[n] == axis:
-        gather(positions, radii, last_order[:n], xy, sr, CIRCLES)
+        gather(positions, radii, last_order[:n], centres, sr, dim)
         for a in range(n):
-            keys[a] = xy[a, axis] - sr[a]
+            keys[a] = centres[a, axis] - sr[a]
             perm[a] = a
         swaps = insertion_sort(perm, keys, MAX_SWAPS_PER_OBJECT)
         if swaps >= 0:
@@ -97,18 +110,62 @@ def sap_prepare(positions, radii, axis_mode, last_order, incremental, order, wor
         for i in range(n):
             keys[i] = positions[i, axis] - radii[i]
         order[:n] = radix_argsort(sortable_bits(keys))
-        gather(positions, radii, order[:n], xy, sr, CIRCLES)
+        gather(positions, radii, order[:n], centres, sr, dim)
         for a in range(n):
             perm[a] = a
     order[n] = axis  # remember the axis the order belongs to
     for a in range(n):  # perm is almost the identity: near-sequential reads
         j = perm[a]
         r = sr[j]
-        s_lo[a], s_hi[a] = xy[j, axis] - r, xy[j, axis] + r
-        o_lo[a], o_hi[a] = xy[j, other] - r, xy[j, other] + r
+        bounds[0, a], bounds[1, a] = centres[j, axis] - r, centres[j, axis] + r
+        for k in range(1, d):
+            c = centres[j, others[k - 1]]
+            bounds[2 * k, a], bounds[2 * k + 1, a] = c - r, c + r
     if bounds32.size:
-        bounds32[0], bounds32[1] = o_lo, o_hi
+        for row in range(2, 2 * d):
+            bounds32[row - 2] = bounds[row]
     return axis, swaps
+
+
+def box_beside(rows, a, first, dim):
+    """The bounds of slot a on every axis but the sweep's (lo, hi of each other axis in turn), from
+    the rows of `rows` starting at `first`: a tuple, held in registers through a window's scans
+    (read from the array, they were loaded again after every pair written: 1.1x slower on the
+    clustered scene)."""
+
+
+@overload(box_beside, inline="always")
+def _box_beside(rows, a, first, dim):
+    if dim.count == 2:
+        return lambda rows, a, first, dim: (rows[first, a], rows[first + 1, a])
+    return lambda rows, a, first, dim: (rows[first, a], rows[first + 1, a], rows[first + 2, a], rows[first + 3, a])
+
+
+def rows_beside(rows, s, e, dim):
+    """Slots s..e-1 of rows 0 .. 2 d - 3 of `rows` (sap_sweep_sparse's float32 bounds on the axes
+    but the sweep's), a slice of each: indexed from zero, the tally over them vectorises (indexed
+    from s, measured 1.1x slower)."""
+
+
+@overload(rows_beside, inline="always")
+def _rows_beside(rows, s, e, dim):
+    if dim.count == 2:
+        return lambda rows, s, e, dim: (rows[0, s:e], rows[1, s:e])
+    return lambda rows, s, e, dim: (rows[0, s:e], rows[1, s:e], rows[2, s:e], rows[3, s:e])
+
+
+@nb.njit(cache=True, inline="always")
+def _meets(bounds, box, b, dim):
+    """Whether slot b's box overlaps `box` (box_beside) on every axis but the sweep's (closed
+    intervals). A loop over the other axes of known length: unrolled, and a loop over b that
+    calls it is vectorised as the 2D sweep's loop over one axis was (as fast in 2D, and 4 to 5x
+    the scalar sweep it replaces in 3D). b is indexed unsigned: a signed index gets numba's
+    wrap-around for negative indices, which kept such loops from vectorising."""
+    hit = True
+    b = nb.uint64(b)
+    for k in range(1, len(dim)):
+        hit &= (bounds[2 * k, b] <= box[2 * k - 1]) & (bounds[2 * k + 1, b] >= box[2 * k - 2])
+    return hit
 
 
 @nb.njit(cache=True, inline="always")
@@ -132,71 +189,70 @@ def _window_end(s_lo, a, top, prev_end, prev_top):
 
 
 @nb.njit(cache=True)
-def _sweep_range(order, s_lo, s_hi, o_lo, o_hi, a0, a1, buf):
+def _sweep_range(order, bounds, a0, a1, dim, buf):
     """Pairs of the objects in sorted slots a0..a1-1 with later ones, into buf; returns (pairs
     found, pairs overlapping on the sweep axis).
 
     Each object's window (the later objects overlapping it on the sweep axis) is found first,
-    then its hits on the other axis are counted by a loop over slices, which the compiler
-    vectorises (indices from zero cannot wrap around). Most windows of a sparse scene have no
-    hit. In one with a few, a second vectorised pass finds the first and last hit and only that
-    span is walked to emit; in one with more, each chunk of SWEEP_CHUNK is counted and walked if
-    it has a hit. Against the chunks alone, measured 1.5x faster on the uniform scene at
-    n = 131072 (windows of 160, about one hit), 1.07x slower on the clustered one (windows of
-    800, 45 hits).
+    then its hits on the other axes are counted by a loop the compiler vectorises. Most windows
+    of a sparse scene have no hit. In one with a few, a second vectorised pass finds the first
+    and last hit and only that span is walked to emit; in one with more, each chunk of
+    SWEEP_CHUNK is counted and walked if it has a hit. Against the chunks alone, measured 1.5x
+    faster on the uniform scene at n = 131072 (windows of 160, about one hit), 1.07x slower on
+    the clustered one (windows of 800, 45 hits).
     """
+    s_lo, s_hi = bounds[0], bounds[1]
     count = 0
     axis_hits = 0
     end, prev_top = 0, -np.inf
     for a in range(a0, a1):
-        top, lo_a, hi_a, i = s_hi[a], o_lo[a], o_hi[a], order[a]
+        top, i, box = s_hi[a], order[a], box_beside(bounds, a, 2, dim)
         end = _window_end(s_lo, a, top, end, prev_top)
         prev_top = top
-        lo_b, hi_b, ids_b = o_lo[a + 1:end], o_hi[a + 1:end], order[a + 1:end]
-        m = lo_b.shape[0]
+        b0, m = a + 1, end - a - 1
         axis_hits += m
         hits = 0
         for t in range(m):
-            hits += (lo_b[t] <= hi_a) & (hi_b[t] >= lo_a)
+            hits += _meets(bounds, box, b0 + t, dim)
         if hits == 0:
             continue
         if hits <= FEW_HITS:
             first = last = 0  # the hits lie in m - first .. last - 1
             for t in range(m):
-                hit = (lo_b[t] <= hi_a) & (hi_b[t] >= lo_a)
+                hit = _meets(bounds, box, b0 + t, dim)
                 last = max(last, hit * (t + 1))
                 first = max(first, hit * (m - t))
             # Branch-free: every pair is written at row `count`, which only a hit keeps.
             for t in range(m - first, last):
-                emit(buf, count, i, ids_b[t])
-                count += (lo_b[t] <= hi_a) & (hi_b[t] >= lo_a)
+                emit(buf, count, i, order[b0 + t])
+                count += _meets(bounds, box, b0 + t, dim)
             continue
         for c0 in range(0, m, SWEEP_CHUNK):
-            lo_c, hi_c = lo_b[c0:c0 + SWEEP_CHUNK], hi_b[c0:c0 + SWEEP_CHUNK]
+            c1 = min(c0 + SWEEP_CHUNK, m)
             hits = 0
-            for t in range(lo_c.shape[0]):
-                hits += (lo_c[t] <= hi_a) & (hi_c[t] >= lo_a)
+            for t in range(c0, c1):
+                hits += _meets(bounds, box, b0 + t, dim)
             if hits:
-                for t in range(lo_c.shape[0]):
-                    emit(buf, count, i, ids_b[c0 + t])
-                    count += (lo_c[t] <= hi_a) & (hi_c[t] >= lo_a)
+                for t in range(c0, c1):
+                    emit(buf, count, i, order[b0 + t])
+                    count += _meets(bounds, box, b0 + t, dim)
     return count, axis_hits
 
 
 @nb.njit(cache=True)
-def sap_sweep(order, s_lo, s_hi, o_lo, o_hi, buf):
+def sap_sweep(order, bounds, dim, buf):
     """Box-overlap pairs into buf; returns (pairs found, pairs overlapping on the sweep axis)."""
-    return _sweep_range(order, s_lo, s_hi, o_lo, o_hi, 0, s_lo.shape[0], buf)
+    return _sweep_range(order, bounds, 0, bounds.shape[1], dim, buf)
 
 
 @nb.njit(cache=True)
-def sap_sweep_sparse(order, s_lo, s_hi, o_lo, o_hi, bounds32, ramp, a0, a1, buf):
+def sap_sweep_sparse(order, bounds, bounds32, ramp, a0, a1, dim, buf):
     """sap_sweep for scenes where most windows hold at most one hit, over sorted slots a0..a1-1
     (a parameter: a wrapper that inlined this sweep measured up to 1.3x slower); returns (pairs
     found, pairs overlapping on the sweep axis, crowded windows: those with more than FEW_HITS
     hits in float32).
 
-    Each window's hits on the other axis are tallied on its bounds rounded to float32, 8 to a
+    Each window's hits on the other axes are tallied on their bounds rounded to float32, 8 to a
     vector instead of 4: never fewer than the exact hits, as rounding is monotonic (a <= b in
     float64 stays so in float32; the far side of float32's range rounds to infinity, which keeps
     order too). The tally also sums the hits' positions in the window (`ramp` holds 1, 2, 3, ...).
@@ -209,7 +265,7 @@ def sap_sweep_sparse(order, s_lo, s_hi, o_lo, o_hi, bounds32, ramp, a0, a1, buf)
     (numba widens integer sums to int64, which splits every vector in two: slower than the
     float64 sweep). The positions' sum may wrap around; it is only read when it holds one position.
     """
-    lo32, hi32 = bounds32[0], bounds32[1]
+    s_lo, s_hi = bounds[0], bounds[1]
     none = np.int32(0)
     count = 0
     axis_hits = crowded = 0
@@ -219,17 +275,19 @@ def sap_sweep_sparse(order, s_lo, s_hi, o_lo, o_hi, bounds32, ramp, a0, a1, buf)
         end = _window_end(s_lo, a, top, end, prev_top)
         prev_top = top
         axis_hits += end - a - 1
-        lo_af, hi_af = lo32[a], hi32[a]
+        box32 = box_beside(bounds32, a, 0, dim)
         s, e = a + 1, end  # the piece of the window being tallied
         while s < end:
-            lo_f, hi_f = lo32[s:e], hi32[s:e]
             hits = place = none
+            piece = rows_beside(bounds32, s, e, dim)
             for t in range(e - s):
-                hit = (lo_f[t] <= hi_af) & (hi_f[t] >= lo_af)
+                hit = True
+                for k in range(len(dim) - 1):
+                    hit &= (piece[2 * k][t] <= box32[2 * k + 1]) & (piece[2 * k + 1][t] >= box32[2 * k])
                 hits = np.int32(hits + np.int32(hit))
                 place = np.int32(place + (ramp[t] if hit else none))
             if hits > FEW_HITS and e - s == end - a - 1:  # a crowded window (this is all of it)
-                count += _sweep_range(order, s_lo, s_hi, o_lo, o_hi, a, a + 1, buf[count:])[0]
+                count += _sweep_range(order, bounds, a, a + 1, dim, buf[count:])[0]
                 crowded += 1
                 break
             if hits > 1:
@@ -238,25 +296,25 @@ def sap_sweep_sparse(order, s_lo, s_hi, o_lo, o_hi, bounds32, ramp, a0, a1, buf)
             if hits:
                 b = s + place - 1
                 emit(buf, count, order[a], order[b])
-                count += (o_lo[b] <= o_hi[a]) & (o_hi[b] >= o_lo[a])
+                count += _meets(bounds, box_beside(bounds, a, 2, dim), b, dim)
             s, e = e, end
     return count, axis_hits, crowded
 
 
 @nb.njit(cache=True, parallel=True)
-def sap_sweep_parallel(order, s_lo, s_hi, o_lo, o_hi, bounds32, ramp, bufs):
+def sap_sweep_parallel(order, bounds, bounds32, ramp, dim, bufs):
     """sap_sweep, or sap_sweep_sparse unless bounds32 is empty, with the objects split into one
     chunk per row of bufs, swept in parallel (each window is independent); returns (pairs per
     chunk, sweep-axis overlaps per chunk, crowded windows per chunk)."""
-    chunks, n = bufs.shape[0], s_lo.shape[0]
+    chunks, n = bufs.shape[0], bounds.shape[1]
     counts, axis_hits, crowded = np.zeros((3, chunks), dtype=np.int64)
     for c in nb.prange(chunks):
         a0, a1 = c * n // chunks, (c + 1) * n // chunks
         if bounds32.size:
-            counts[c], axis_hits[c], crowded[c] = sap_sweep_sparse(order, s_lo, s_hi, o_lo, o_hi, bounds32, ramp,
-                                                                   a0, a1, bufs[c])
+            counts[c], axis_hits[c], crowded[c] = sap_sweep_sparse(order, bounds, bounds32, ramp, a0, a1, dim,
+                                                                   bufs[c])
         else:
-            counts[c], axis_hits[c] = _sweep_range(order, s_lo, s_hi, o_lo, o_hi, a0, a1, bufs[c])
+            counts[c], axis_hits[c] = _sweep_range(order, bounds, a0, a1, dim, bufs[c])
     return counts, axis_hits, crowded
 
 
@@ -275,10 +333,10 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
     overlaps: on a dense scene the plain sweep tests O(sqrt(n)) pairs per object, the strips a few.
     A strip sweep's "auto" axis is the one along which the boxes extend further.
 
-    Spheres (positions (n, 3)): the plain sweep in 3D, along x, y, z, or with "auto" the one of the
-    three along which the centres vary most, repaired between frames where incremental
-    (own/sap3d.py), in columns over the other two axes where `strips` says (the strips' 3D form);
-    the sparse sweep and the parallel sweep are not taken there yet.
+    Spheres (positions (n, 3)): the same sort and sweeps, one source compiled for each dimension
+    (own/dimension.py), along x, y, z, or with "auto" the one of the three along which the centres
+    vary most; where `strips` says, in columns over the other two axes (own/columns.py, the
+    strips' 3D form).
 
     `skin` (None: a quarter of a mean diameter, adapting to the motion as the trees' does; a
     distance; 0: none) sweeps the boxes grown by half the skin and keeps their pairs: while no
@@ -290,10 +348,9 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
     name = "own.sap"
     method = "sweep"
     dims = (2, 3)
-    _sweep3: Sweep3 | None = None  # the state over spheres
     sweeps = (Knob("axis", fixed(["x", "y", "auto"]), "sweep axis", dims=(2,)),
               Knob("axis", fixed(["x", "y", "z", "auto"]), "sweep axis", dims=(3,)),
-              Knob("sweep", fixed(["plain", "sparse", "auto"]), "sweep", dims=(2,)),
+              Knob("sweep", fixed(["plain", "sparse", "auto"]), "sweep"),
               Knob("strips", fixed(["on", "off", "auto"]), "strips (columns over spheres)"))
     defaults = {"axis": "auto", "incremental": False, "sweep": "auto", "strips": "auto", "parallel": False,
                 "parallel_from": PARALLEL_FROM_OVERLAPS, "skin": None}
@@ -303,7 +360,7 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         for key, allowed in (("axis", AXES), ("sweep", SWEEPS), ("strips", STRIPS)):
             if self.params[key] not in allowed:
                 raise ValueError(f"{self.name}: {key} must be one of {', '.join(allowed)}, got {self.params[key]!r}")
-        self._axis_mode = AXES.index(self.params["axis"])
+        self._axis_mode = AXES.index(self.params["axis"]) if self.params["axis"] != "auto" else -1
         self._incremental = bool(self.params["incremental"])
         self._parallel_from = self._int_param("parallel_from", 0)
         self._collect = PairCollector()
@@ -320,8 +377,6 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         return pos
 
     def _reset(self, positions, radii):
-        if self.dim == 3 and (self.params["sweep"] == "sparse" or self.params["parallel"]):
-            raise ValueError(f"{self.name}: sweep='sparse' and parallel are not taken over spheres yet")
         self._dim = marker(self.dim)
         self._adapts = self.params["skin"] is None
         if self._built and self._adapts:
@@ -343,14 +398,8 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         """The sweep's state, built for this skin's grown boxes, and this frame's sort."""
         if not np.isfinite(self._largest_radius + 0.5 * self._skin):
             self._skin = 0.0  # radii near the largest double leave no room for a skin (exact without one)
-        self._swept_skin = self._skin
-        self._sweep_radii = self.radii + 0.5 * self._skin if self._skin > 0.0 else self.radii
-        self._sweep3 = None
-        if self.dim == 3:
-            self._sweep3 = Sweep3(self._sweep_radii, self.params["axis"], self._incremental, self.params["strips"])
-            self._build(positions)
-            return
-        n = self.n
+        self._set_sweep_radii()
+        n, d = self.n, self.dim
         # Where a repair gave up (everything moving: a tumbler, a drum), the next ones are likely
         # to as well, each after costing more than the sort: tried again only now and then.
         self._repairs = RepairSchedule()
@@ -359,31 +408,42 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         # The order is double-buffered (the repair reads last frame's while it writes this
         # frame's); its last entry is its axis, none yet. Every work array is kept between frames.
         self._order, self._spare_order = np.full(n + 1, -1, dtype=np.int64), np.empty(n + 1, dtype=np.int64)
-        self._work = (np.empty((n, 2)), np.empty(n), np.empty(n), np.empty(n, dtype=np.int64))
-        self._sorted = tuple(np.empty(n) for _ in range(4))
-        # The strip sweep's first slot and widest box of each strip, and each object's strip.
+        self._work = (np.empty((n, d)), np.empty(n), np.empty(n), np.empty(n, dtype=np.int64))
+        self._bounds = np.empty((2 * d, n))  # sorted: lo, hi on the sweep axis, then on each other axis
+        self._rows = tuple(self._bounds)  # the strips' form of them (2D): s_lo, s_hi, o_lo, o_hi
+        # The strip sweep's first slot and widest box of each strip, and each object's strip (2D);
+        # the columns' order, bounds, starts, widest boxes and row width (3D).
         self._strip_start, self._strip_width = np.zeros(n + 1, dtype=np.int64), np.empty(n)
         self._strip_of = np.empty(n, dtype=np.int64)
         self._strips = 0  # strips swept this frame; 0: a plain sweep
-        # The sparse sweep's float32 bounds, filled only in frames that use it (an empty pair of
-        # rows in the others), and the window positions it sums; none where it can never run.
+        self._col_order, self._col_bounds = np.empty(n, dtype=np.int64), np.empty((2 * d, n))
+        self._col_start, self._col_widest, self._col_w = np.empty(0, dtype=np.int64), np.empty(0), 0
+        self._columns = 0  # columns swept this frame; 0: a plain sweep
+        # The sparse sweep's float32 bounds, filled only in frames that use it (empty rows in the
+        # others), and the window positions it sums; none where it can never run.
         sparse_n = n if self.params["sweep"] != "plain" and n <= MAX_SPARSE_N else 0
-        self._bounds32 = np.empty((2, sparse_n), dtype=np.float32)
-        self._no_bounds32 = np.empty((2, 0), dtype=np.float32)
+        self._bounds32 = np.empty((2 * d - 2, sparse_n), dtype=np.float32)
+        self._no_bounds32 = np.empty((2 * d - 2, 0), dtype=np.float32)
         self._ramp = np.arange(1, sparse_n + 1, dtype=np.int32)
         # Load (or compile) the sweeps now, in the untimed build: else the first frame that uses
         # one pays for it (for the parallel one, 4 s with a cold cache, and starting the threads).
-        nothing, no_order = np.empty(0), np.empty(0, dtype=np.int64)
+        nothing, no_order = np.empty((2 * d, 0)), np.empty(0, dtype=np.int64)
         if sparse_n:
-            self._collect(sap_sweep_sparse, no_order, nothing, nothing, nothing, nothing, self._no_bounds32,
-                          self._ramp, 0, 0)
+            self._collect(sap_sweep_sparse, no_order, nothing, self._no_bounds32, self._ramp, 0, 0, self._dim)
         if self._collect_chunks is not None:
-            self._collect_chunks(sap_sweep_parallel, no_order, nothing, nothing, nothing, nothing,
-                                 self._no_bounds32, self._ramp)
-            if self.params["strips"] != "off":
-                self._collect_chunks(strip_sweep_parallel, no_order, nothing, nothing, nothing, nothing,
-                                     np.zeros(1, dtype=np.int64), nothing)
+            self._collect_chunks(sap_sweep_parallel, no_order, nothing, self._no_bounds32, self._ramp, self._dim)
+            if self.params["strips"] != "off" and d == 2:
+                self._collect_chunks(strip_sweep_parallel, no_order, *nothing, np.zeros(1, dtype=np.int64),
+                                     np.empty(0))
         self._build(positions)
+
+    def _set_sweep_radii(self):
+        """The radii of the boxes swept (grown by half the skin), and the columns' side (3D)."""
+        self._swept_skin = self._skin
+        self._sweep_radii = self.radii + 0.5 * self._skin if self._skin > 0.0 else self.radii
+        grown = self._largest_radius + 0.5 * self._skin
+        self._column_side = 2.0 * grown * COLUMN_PAD if self.n else 0.0
+        self._mean_width = 2.0 * float(self._sweep_radii.mean()) if self.n else 0.0
 
     def _sparse_sweep(self) -> bool:
         """Whether this frame sweeps with sap_sweep_sparse: pair counts change little between frames."""
@@ -404,12 +464,8 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         if self._adapts:
             kept = len(self._kept) if self._kept is not None else None
             self._skin = self._skins.next(self._since, kept, self._overlapping, self.n)
-        if self._skin != self._swept_skin and self._sweep3 is not None:
-            self._start_sweep(positions)  # the columns' sweep holds its radii: built anew for the new skin
-            return
-        if self._skin != self._swept_skin:  # 2D: the bounds come from the radii each frame, the order stays
-            self._swept_skin = self._skin
-            self._sweep_radii = self.radii + 0.5 * self._skin if self._skin > 0.0 else self.radii
+        if self._skin != self._swept_skin:  # the bounds come from the radii each frame, the order stays
+            self._set_sweep_radii()
         self._build(positions)
 
     def _build(self, positions):
@@ -421,22 +477,43 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         self._stats.update({"skin": self._skin, "builds": self._builds, "reused": 0})
 
     def _sweep_update(self, positions):
-        if self._sweep3 is not None:
-            self._sweep3.update(positions)
-            self._stats = self._sweep3.stats()
-            return
-        if self.params["strips"] != "off" and self._strip_update(positions):
+        if self.dim == 2 and self.params["strips"] != "off" and self._strip_update(positions):
             return
         self._strips = 0
         self._sparse = self._sparse_sweep()
         repair, last = self._repair_due(), self._order[self.n]
         axis, swaps = sap_prepare(positions, self._sweep_radii, self._axis_mode, self._order, repair,
-                                  self._spare_order, self._work, self._sorted,
-                                  self._bounds32 if self._sparse else self._no_bounds32)
+                                  self._spare_order, self._work, self._bounds,
+                                  self._bounds32 if self._sparse else self._no_bounds32, self._dim)
         self._repairs.record(repair and last == axis, swaps)  # tried only on last frame's order for this axis
         self._order, self._spare_order = self._spare_order, self._order
-        self._stats = {"axis": axis, "swaps": swaps, "sparse_sweep": int(self._sparse), "crowded_windows": 0,
-                       "strips": 0}
+        self._stats = {"axis": axis, "swaps": swaps, "sparse_sweep": int(self._sparse), "crowded_windows": 0}
+        if self.dim == 2:
+            self._stats["strips"] = 0
+        else:
+            self._column_update()
+
+    def _column_update(self):
+        """Count this frame's sorted boxes into columns, where they pay (or are asked for) and hold."""
+        self._columns = 0
+        mode = self.params["strips"]
+        if mode == "off" or not (self._column_side > 0 and np.isfinite(self._column_side)):
+            self._stats["columns"] = 0
+            return
+        if mode == "auto":  # where the plain sweep would test COLUMNS_FROM_WINDOW boxes per box
+            n = self.n
+            # The lower bounds are sorted: their extent is the last less the first.
+            extent = float(self._bounds[0, n - 1] - self._bounds[0, 0]) + self._mean_width if n > 1 else 0.0
+            window = n * self._mean_width / extent if np.isfinite(extent) and extent > 0 else 0.0
+            if not window >= COLUMNS_FROM_WINDOW:
+                self._stats["columns"] = 0
+                return
+        self._col_start, self._col_widest, self._col_w = column_prepare(
+            self._order[:self.n], self._bounds, self._column_side, self._col_order, self._col_bounds)
+        self._columns = max(len(self._col_start) - self._col_w - 3, 0)
+        self._stats["columns"] = self._columns
+        self._sparse = self._sparse and not self._columns
+        self._stats["sparse_sweep"] = int(self._sparse)
 
     def _repair_due(self) -> bool:
         return self._incremental and self._repairs.due(True)
@@ -444,13 +521,14 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
     def _strip_update(self, positions) -> bool:
         """Sort for a strip sweep, where strips pay (or are asked for) and hold; False: sweep plain."""
         last = self._order[self.n]  # axis + 2 after a strip sweep
-        plan = strip_plan(positions, self._sweep_radii, self._axis_mode, self.params["strips"] == "on", last - 2 if last >= 2 else -1)
+        plan = strip_plan(positions, self._sweep_radii, self._axis_mode, self.params["strips"] == "on",
+                          last - 2 if last >= 2 else -1)
         axis, strips = plan[0], plan[3]
         if not strips:
             return False
         repair = self._repair_due()
         swaps = strip_prepare(positions, self._sweep_radii, plan, self._order, repair, self._spare_order,
-                              self._work, self._sorted, self._strip_start[:strips + 1], self._strip_width[:strips],
+                              self._work, self._rows, self._strip_start[:strips + 1], self._strip_width[:strips],
                               self._strip_of)
         if swaps == -2:
             return False
@@ -461,7 +539,7 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         return True
 
     def _strip_pairs(self):
-        args = (self._order[:self.n], *self._sorted, self._strip_start[:self._strips + 1],
+        args = (self._order[:self.n], *self._rows, self._strip_start[:self._strips + 1],
                 self._strip_width[:self._strips])
         if self._collect_chunks is not None and self._last_overlaps >= self._parallel_from:
             out, (tested,) = self._collect_chunks(strip_sweep_parallel, *args)
@@ -484,22 +562,24 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         return out
 
     def _sweep_pairs(self):
-        if self._sweep3 is not None:
-            out = self._sweep3.pairs()
-            self._stats = {**self._stats, **self._sweep3.stats()}
-            return out
         if self._strips:
             return self._strip_pairs()
+        if self._columns:
+            out, (tested,) = self._collect(column_sweep, self._col_order, self._col_bounds, self._col_start,
+                                           self._col_widest, self._col_w)
+            self._stats["axis_overlaps"] = self._last_overlaps = tested
+            self._last_pairs = len(out)
+            return out
         order, bounds32 = self._order[:self.n], self._bounds32 if self._sparse else self._no_bounds32
         crowded = 0
         if self._collect_chunks is not None and self._last_overlaps >= self._parallel_from:
-            out, (axis_hits, crowded) = self._collect_chunks(sap_sweep_parallel, order, *self._sorted, bounds32,
-                                                             self._ramp)
+            out, (axis_hits, crowded) = self._collect_chunks(sap_sweep_parallel, order, self._bounds, bounds32,
+                                                             self._ramp, self._dim)
         elif self._sparse:
-            out, (axis_hits, crowded) = self._collect(sap_sweep_sparse, order, *self._sorted, bounds32, self._ramp,
-                                                      0, self.n)
+            out, (axis_hits, crowded) = self._collect(sap_sweep_sparse, order, self._bounds, bounds32, self._ramp,
+                                                      0, self.n, self._dim)
         else:
-            out, (axis_hits,) = self._collect(sap_sweep, order, *self._sorted)
+            out, (axis_hits,) = self._collect(sap_sweep, order, self._bounds, self._dim)
         self._stats["axis_overlaps"] = self._last_overlaps = axis_hits
         self._stats["crowded_windows"] = crowded
         self._last_pairs = len(out)
@@ -510,24 +590,30 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         return out
 
     def structure(self):
-        if self._sweep3 is not None:
-            return {}
-        s_lo, s_hi = self._sorted[0], self._sorted[1]
-        return {"intervals": np.column_stack([s_lo, s_hi]), "axis": np.array(self._stats["axis"])}
+        return {"intervals": self._bounds[:2].T, "axis": np.array(self._stats["axis"])}
 
     def validate(self):
         if self._skin > 0.0:
             step = largest_step(self._positions, self._anchor, self._dim)
             assert step <= 0.5 * self._skin, "an object outran the skin"
-        if self._sweep3 is not None:
-            self._sweep3.validate()
-            return
-        order, s_lo = self._order[:self.n], self._sorted[0]
-        assert np.array_equal(np.sort(order), np.arange(self.n)), "sort order is not a permutation"
-        starts = self._strip_start[:self._strips + 1] if self._strips else np.array([0, self.n])
-        assert starts[0] == 0 and starts[-1] == self.n and (np.diff(starts) >= 0).all(), "strips do not tile the order"
+        n, order, s_lo = self.n, self._order[:self.n], self._bounds[0]
+        assert np.array_equal(np.sort(order), np.arange(n)), "sort order is not a permutation"
+        built = self._anchor if self._anchor is not None else self._positions  # where the boxes were sorted
+        axis = self._stats["axis"]
+        assert np.array_equal(s_lo, built[order, axis] - self._sweep_radii[order]), \
+            "sorted bounds are not their objects'"
+        starts = self._strip_start[:self._strips + 1] if self._strips else np.array([0, n])
+        assert starts[0] == 0 and starts[-1] == n and (np.diff(starts) >= 0).all(), "strips do not tile the order"
         for s, e in zip(starts[:-1], starts[1:]):
-            assert (np.diff(s_lo[s:e]) >= 0).all(), "lower bounds are not sorted" + (" within a strip" if self._strips else "")
+            assert (np.diff(s_lo[s:e]) >= 0).all(), \
+                "lower bounds are not sorted" + (" within a strip" if self._strips else "")
+        if self._columns:
+            start = self._col_start
+            assert start[-1] == n and (np.diff(start) >= 0).all(), "column starts are not a prefix sum"
+            assert np.array_equal(np.sort(self._col_order), np.arange(n)), "column order is not a permutation"
+            for c in np.flatnonzero(np.diff(start)):
+                assert (np.diff(self._col_bounds[0, start[c]:start[c + 1]]) >= 0).all(), \
+                    f"column {c} is not sorted by lower bound"
 
 
 class IncrementalSweepAndPrune(SweepAndPrune):
@@ -543,4 +629,3 @@ class ParallelSweepAndPrune(SweepAndPrune):
 
     name = "own.sap_parallel"
     defaults = {**SweepAndPrune.defaults, "incremental": True, "parallel": True}
-    dims = (2,)

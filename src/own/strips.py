@@ -38,7 +38,7 @@ WIDTH_PAD = 1.0 + 1e-12
 
 @nb.njit(cache=True)
 def strip_plan(positions, radii, axis_mode, always, last_axis):
-    """(axis, base, 1 / height, strips, s0, s1): the sweep axis (`axis_mode` 0 x, 1 y, 2 the
+    """(axis, base, 1 / height, strips, s0, s1): the sweep axis (`axis_mode` 0 x, 1 y, -1 the
     longer extent, where `last_axis` stays unless the other extent is AXIS_STAYS longer: a square
     scene would otherwise flip between frames, and each flip costs a sort from scratch), strips
     along the other one, and the boxes' extent on the sweep axis; strips =
@@ -54,7 +54,7 @@ def strip_plan(positions, radii, axis_mode, always, last_axis):
         widest = max(widest, r)
         total += r
     axis = axis_mode
-    if axis_mode == 2:
+    if axis_mode < 0:
         axis = int(y1 - y0 > x1 - x0)
         longer, shorter = max(x1 - x0, y1 - y0), min(x1 - x0, y1 - y0)
         if last_axis >= 0 and axis != last_axis and longer <= AXIS_STAYS * shorter:
