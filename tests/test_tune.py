@@ -195,7 +195,8 @@ def test_tuning_over_spheres_sweeps_the_knobs_that_apply_in_3d(tmp_path):
     points = pd.read_csv(tmp_path / "tune.csv")
     assert set(points.backend) == {"own.sap"}  # own.grid's cell is a knob of circles only
     axes = set(points[points.param == "axis"].value)
-    assert axes == {"x", "y", "z", "auto"} and set(points.param) <= {"axis", "strips", "best", "default"}
+    assert axes == {"x", "y", "z", "auto"} and set(points.param) <= {"axis", "sweep", "strips", "best", "default"}
+    assert {"plain", "sparse"} <= set(points[points.param == "sweep"].value)  # the sparse sweep over spheres too
     assert (points.missed == 0).all()
 
 
