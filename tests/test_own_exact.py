@@ -410,7 +410,7 @@ def test_incremental_grids_stay_exact_when_the_scene_stops_qualifying_mid_run(na
         frame = 200.0 + (positions - 200.0) * scale
         grid.update(frame)
         grid.validate()
-        large.append(int((grid._state[0][2] == grid_incremental.key_space(grid._layout)[7]).sum()))
+        large.append(int((grid._state[0][2] == grid_incremental.large_key(grid._layout, 2)).sum()))
         np.testing.assert_array_equal(np.sort(keys(grid.pairs(), 600)), np.sort(keys(brute_pairs(frame, radii), 600)))
     assert large[0] == 0 and max(large) == 600 and large[-1] == 0, large
 

@@ -15,7 +15,7 @@ from interface.checks import check_positions
 from interface.pairs import is_canonical, keys
 from own import grid_incremental3d
 from own.brute import brute_pairs
-from own.grid3d import grid3_box_pairs
+from own.grid import grid_box_pairs
 from own.reference import BRUTE_FORCE_LIMIT, box_pairs, circle_pairs, narrow_phase
 from scenes.generate import at_essay_density
 from scenes.motion import simulate
@@ -58,8 +58,8 @@ def test_boundary_cases_in_3d():
     apart = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 2.0 + 1e-12]])  # apart on z alone
     assert brute_pairs(touching, np.ones(2)).tolist() == [[0, 1]]
     assert brute_pairs(apart, np.ones(2)).tolist() == []
-    assert grid3_box_pairs(touching, np.ones(2)).tolist() == [[0, 1]]
-    assert grid3_box_pairs(apart, np.ones(2)).tolist() == []
+    assert grid_box_pairs(touching, np.ones(2)).tolist() == [[0, 1]]
+    assert grid_box_pairs(apart, np.ones(2)).tolist() == []
     # Boxes touch at the corner, spheres do not; spheres touching on z count.
     assert narrow_phase(touching, np.ones(2), brute_pairs(touching, np.ones(2))).tolist() == []
     on_z = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 2.0]])
@@ -78,7 +78,7 @@ def test_brute_force_in_3d_is_the_definition(scene):
 def test_the_3d_grid_finds_exactly_the_box_overlaps(scene):
     positions, radii = scene
     n = len(positions)
-    np.testing.assert_array_equal(np.sort(keys(grid3_box_pairs(positions, radii), n)),
+    np.testing.assert_array_equal(np.sort(keys(grid_box_pairs(positions, radii), n)),
                                   keys(brute_pairs(positions, radii), n))
 
 
@@ -153,9 +153,23 @@ def test_our_sphere_backends_take_statics_and_spawning_exactly(name):
         np.testing.assert_array_equal(np.sort(keys(backend.pairs(), n)), keys(expected, n))
 
 
-def test_our_grid_refuses_a_cell_over_spheres_in_one_line():
-    with pytest.raises(ValueError, match=r"^own.grid: p and cell are not taken over spheres yet"):
-        engines.create("own.grid", cell=5.0).reset(np.zeros((3, 3)), np.ones(3))
+def test_our_grid_takes_p_cell_statics_and_large_spheres_and_the_kept_grids_refuse_p_and_cell_in_one_line():
+    rng = np.random.default_rng(9)
+    positions, radii = rng.uniform(0, 100, (800, 3)), rng.uniform(0.5, 3.0, 800)
+    radii[:4] = 30.0  # wider than a cell: the large bucket
+    static = rng.random(800) < 0.4
+    expected = box_pairs(positions, radii, static=static)
+    for params in ({}, {"p": 6}, {"cell": 9.0}, {"vector": False}):
+        grid = engines.create("own.grid", **params)
+        grid.small_scene_n = 0
+        grid.reset(positions, radii, static=static)
+        grid.validate()
+        assert grid.stats()["large"] >= 1 and grid.stats()["statics"] == static.sum()
+        np.testing.assert_array_equal(np.sort(keys(grid.pairs(), 800)), keys(expected, 800))
+    with pytest.raises(ValueError, match=r"^own.grid: vector scans circles only"):
+        engines.create("own.grid", vector=True).reset(positions, radii)
+    with pytest.raises(ValueError, match=r"^own.grid_incremental: p and cell are not taken over spheres yet"):
+        engines.create("own.grid_incremental", cell=5.0).reset(np.zeros((3, 3)), np.ones(3))
 
 
 def test_our_sweep_and_prune_works_in_3d_along_the_axis_asked():
@@ -226,8 +240,7 @@ def test_the_3d_grid_stays_small_on_a_line_of_spheres():
     positions[:, 0] = np.arange(n) * 3.0  # far apart along x, nothing along y and z
     grid = engines.create("own.grid")
     grid.reset(positions, np.ones(n))
-    start = grid._cubes.slots[0]
-    assert len(start) <= 8 * n + 64 + 1
+    assert len(grid._start) <= 8 * n + 64 + 3
     assert len(grid.pairs()) == 0
 
 

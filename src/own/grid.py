@@ -1,6 +1,8 @@
 """Uniform grid with a half stencil: each object is counting-sorted into the one cell holding its
 centre, and each cell is tested against itself and 4 of its 8 neighbours (east, and the three
-above), so every neighbouring pair of cells is visited once and every pair is found once.
+above), so every neighbouring pair of cells is visited once and every pair is found once. Over
+spheres the same, 13 of a cube's 26 neighbours: one source for circles and spheres, compiled for
+each by the dimension's marker (own/dimension.py; the stencil and the key space picked by it).
 
 That is exact for "small" objects, whose diameter plus a rounding margin fits in a cell: two such
 boxes can only overlap when their centres are at most one cell apart. Larger objects go into one
@@ -25,14 +27,15 @@ import math
 
 import numba as nb
 import numpy as np
+from numba.extending import overload
 
 from interface.base import BroadPhase
 from interface.checks import shown
 from interface.knobs import Knob, mean_diameter, sizes
 
-from .common import PairCollector, centre_extents, emit, one_radius, radius_of
+from .common import PairCollector, centre_extents, emit, one_radius, radius_of, row_of
 from .compress import NATIVE, SLACK_ROWS, scan_compressed
-from .grid3d import CubesForSpheres
+from .dimension import marker
 from .small import SmallScenes
 
 # The grid has at most this many cells per object (cells are enlarged to fit), so tiny radii in a
@@ -51,8 +54,17 @@ ROUNDING_ULPS = 64
 # fastest: 1.1x faster than the scalar scan on uniform scenes of 0.9 to 5.7 tests per object
 # (n = 32768), where 1 and 3 were up to 5% slower than it at the sparse end.
 VECTOR_FROM = 2
-# Layout as a float array: origin x, y; cell width, height; cells along x, y.
-OX, OY, CW, CH, NX, NY = range(6)
+# Layout as a float array of 3 d entries: the origin on each axis, the cell's width on each, the
+# cells along each (in 2D: origin x, y; cell width, height; cells along x, y).
+OX, OY, CW, CH, NX, NY = range(6)  # the entries' places over circles
+# Cells counted with this much padding per axis against the cap, by dimension. The padded key space
+# (key_space) holds (nx + 2)(ny + 2)(nz + 1) keys over spheres: on a line or a flat layer, 6x the
+# cells, so there the cells are counted as (nx + 3)(ny + 3)(nz + 3); over circles, rows of nx + 2
+# keys are under twice the cells, which are counted bare, as they always were.
+PADDED = (0, 0, 0, 3)
+# Room above MAX_CELLS_PER_OBJECT cells an object for the smallest layout, by dimension (over
+# spheres one cell counts as 27 with its padding).
+CELLS_ROOM = (0, 0, 16, 64)
 # A repair of last frame's slot order gives up past this many swaps per object and counting-sorts.
 MAX_SWAPS_PER_OBJECT = 8
 
@@ -64,110 +76,176 @@ def cell_of(v: float, origin: float, inv: float, last: float) -> int:
     return int(min(max((v - origin) * inv, 0.0), last))
 
 
-@nb.njit(cache=True, inline="always")
-def key_space(layout):
-    """What a key computation needs of the layout: (origin x, y, inverse cell width, height,
-    last cell index along x, y, row width of the padded key space, key of the large bucket)."""
-    w = int(layout[NX]) + 2
-    return (layout[OX], layout[OY], 1.0 / layout[CW], 1.0 / layout[CH], layout[NX] - 1.0, layout[NY] - 1.0,
-            w, (int(layout[NY]) + 1) * w)
+def key_space(layout, dim):
+    """What a key computation needs of the layout, as scalars the compiler keeps in registers:
+    (origin on each axis, inverse cell widths, last cell index on each axis, the key stride of
+    each axis, the key of the large bucket).
+
+    Keys live in a padded key space, so that the pair search needs no edge cases (each costs a
+    branch per object): rows of nx + 2 cells (an empty column on each side), in 3D layers of
+    ny + 2 rows (an empty row below and above), and one empty row (2D) or layer (3D) on top. A
+    cell's key is 1 + the sum over the axes of (its index + the axis's padding below) times the
+    axis's stride; the large bucket follows the last row or layer."""
+
+
+@overload(key_space, inline="always")
+def _key_space(layout, dim):
+    if dim.count == 2:
+        def plane(layout, dim):
+            w = int(layout[4]) + 2
+            return ((layout[0], layout[1]), (1.0 / layout[2], 1.0 / layout[3]), (layout[4] - 1.0, layout[5] - 1.0),
+                    (1, w), (int(layout[5]) + 1) * w)
+        return plane
+
+    def space(layout, dim):
+        w = int(layout[6]) + 2
+        layer = (int(layout[7]) + 2) * w
+        return ((layout[0], layout[1], layout[2]), (1.0 / layout[3], 1.0 / layout[4], 1.0 / layout[5]),
+                (layout[6] - 1.0, layout[7] - 1.0, layout[8] - 1.0), (1, w, layer), (int(layout[8]) + 1) * layer)
+    return space
+
+
+def above(strides, dim):
+    """The half stencil beyond a cell's own row: the first key offset of each run of three cells
+    (one to each side along x) searched from a cell, as the search's second and later runs (the
+    first is the rest of its own cell and the east cell): the row above in 2D; in 3D the row
+    above and the three rows of the layer above. Every pair of neighbouring cells is visited
+    once."""
+
+
+@overload(above, inline="always")
+def _above(strides, dim):
+    if dim.count == 2:
+        return lambda strides, dim: (strides[1] - 1,)
+    return lambda strides, dim: (strides[1] - 1, strides[2] - strides[1] - 1, strides[2] - 1,
+                                 strides[2] + strides[1] - 1)
 
 
 @nb.njit(cache=True, inline="always")
-def cell_key(x, y, r, limit, space):
-    """Key of an object at (x, y) of radius r (see grid_build): its cell's, the large bucket's, or
-    for a radius of NaN (an object not alive, UniformGrid's lifecycle) the absent bucket's, the
-    key after the large one, which the pair search never reads."""
-    ox, oy, inv_x, inv_y, last_x, last_y, w, large = space
-    c = cell_of(y, oy, inv_y, last_y) * w + cell_of(x, ox, inv_x, last_x) + 1
+def _padding(a, d):
+    """Empty cells below axis a's first in the key space (see key_space): the middle axis's rows
+    in 3D; x's empty column is the 1 every key starts from."""
+    return 1 if 0 < a < d - 1 else 0
+
+
+@nb.njit(cache=True, inline="always")
+def cell_key(centres, k, r, limit, space, dim):
+    """Key of the object at row k of `centres` of radius r (see grid_build): its cell's, the large
+    bucket's, or for a radius of NaN (an object not alive, UniformGrid's lifecycle) the absent
+    bucket's, the key after the large one, which the pair search never reads."""
+    origin, inverse, last, strides, large = space
+    c = 1
+    for a in range(len(dim)):
+        c += (cell_of(centres[k, a], origin[a], inverse[a], last[a]) + _padding(a, len(dim))) * strides[a]
     if 2.0 * r <= limit:
         return c
     return large if 2.0 * r > limit else large + 1
 
 
 @nb.njit(cache=True, inline="always")
-def gather_centres(positions, order, xy):
+def gather_centres(positions, order, centres, dim):
     """Centres in `order`: the only scattered reads, in a loop so short that the CPU keeps many
     cache misses in flight (3x faster at n = 2^20 than computing keys in the same loop; taking
     the extent in it too, a chain of min and max through every load, made it 1.5x slower)."""
     for k in range(order.shape[0]):
         i = order[k]
-        xy[k, 0], xy[k, 1] = positions[i, 0], positions[i, 1]
+        for a in range(len(dim)):
+            centres[k, a] = positions[i, a]
 
 
 @nb.njit(cache=True)
-def grid_layout(extent, n, p, cell, max_cells, layout, slack=0.0):
-    """Fill `layout` for n centres spanning `extent` (centre_extents) unless the current one still
-    fits; True if rebuilt.
+def grid_layout(extent, n, p, cell, max_cells, layout, slack, dim):
+    """Fill `layout` (the origin, the cell width and the cells on each axis) for n centres spanning
+    `extent` (common.centre_extents) unless the current one still fits; True if rebuilt.
 
     It still fits while every centre is inside it, or at most `slack` cells outside (clamped into
     the edge cells, still exactly), and the centres span at least half of it on each axis. p > 0
-    gives p x p cells over the centres' extent; otherwise square cells of size `cell` (plus the
-    rounding margin, so a diameter of `cell` fits), enlarged until there are at most `max_cells`.
+    gives p cells along each axis over the centres' extent; otherwise cubic cells of size `cell`
+    (plus the rounding margin, so a diameter of `cell` fits), enlarged until there are at most
+    `max_cells`.
     """
-    x0, y0, x1, y1 = extent
-    sx, sy = x1 - x0, y1 - y0
-    nx, ny = layout[NX], layout[NY]
-    if nx > 0:
-        wx, wy = nx * layout[CW], ny * layout[CH]
-        ox, oy, mx, my = layout[OX], layout[OY], slack * layout[CW], slack * layout[CH]
-        inside = x0 >= ox - mx and y0 >= oy - my and x1 <= ox + wx + mx and y1 <= oy + wy + my
-        if inside and (nx == 1 or sx >= 0.5 * wx) and (ny == 1 or sy >= 0.5 * wy):
+    d = len(dim)
+    lo, hi = extent
+    if layout[2 * d] > 0:
+        fits = True
+        for a in range(d):
+            count, width = layout[2 * d + a], layout[d + a]
+            span, margin = count * width, slack * width
+            fits &= lo[a] >= layout[a] - margin and hi[a] <= layout[a] + span + margin
+            fits &= count == 1 or hi[a] - lo[a] >= 0.5 * span
+        if fits:
             return False
-    if not (math.isfinite(sx) and math.isfinite(sy)):
+    finite, longest, far, volume = True, 0.0, 0.0, 1.0
+    for a in range(d):
+        s = hi[a] - lo[a]
+        finite &= math.isfinite(s)
+        longest, far, volume = max(longest, s), max(far, abs(lo[a]), abs(hi[a])), volume * s
+    for a in range(d):
+        layout[a] = lo[a]
+    if not finite:
         # Centres further apart than the largest double: no cell size spans them, so one cell
         # holds everything (still exact; its cost is quadratic, for input this extreme).
-        cw = ch = float(np.finfo(np.float64).max)
-        nx = ny = 1
+        for a in range(d):
+            layout[d + a], layout[2 * d + a] = np.finfo(np.float64).max, 1
     elif p > 0:
-        cw = sx / p if sx > 0 else (sy / p if sy > 0 else 1.0)
-        ch = sy / p if sy > 0 else cw
-        nx = ny = p
+        fallback = 1.0  # an axis with no extent takes the first other axis's width
+        for a in range(d - 1, -1, -1):
+            if hi[a] - lo[a] > 0:
+                fallback = (hi[a] - lo[a]) / p
+        for a in range(d):
+            layout[d + a] = (hi[a] - lo[a]) / p if hi[a] - lo[a] > 0 else fallback
+            layout[2 * d + a] = p
     else:
         c = cell
         if not c > 0:  # all radii zero: about one object per cell
-            c = math.sqrt(max(sx * sy, sx * sx, sy * sy) / max(n, 1)) or 1.0
+            spread = max(volume, longest ** d) / max(n, 1)
+            c = (math.sqrt(spread) if d == 2 else spread ** (1.0 / d)) or 1.0
         # Room for the rounding margin of small_limit, so that objects whose diameter equals the
         # requested cell still count as small.
-        far = max(abs(x0), abs(x1), abs(y0), abs(y1))
-        c = max(c, max(sx, sy) * 1e-9) + ROUNDING_ULPS * 2 * np.finfo(np.float64).eps * (far + 2 * c)
-        while (math.floor(sx / c) + 1) * (math.floor(sy / c) + 1) > max_cells:
+        c = max(c, longest * 1e-9) + ROUNDING_ULPS * 2 * np.finfo(np.float64).eps * (far + 2 * c)
+        while True:
+            cells = 1.0
+            for a in range(d):
+                cells *= math.floor((hi[a] - lo[a]) / c) + 1 + PADDED[d]
+            if cells <= max_cells:
+                break
             c *= 1.25
-        cw = ch = c
-        nx, ny = math.floor(sx / c) + 1, math.floor(sy / c) + 1
-    layout[OX], layout[OY], layout[CW], layout[CH], layout[NX], layout[NY] = x0, y0, cw, ch, nx, ny
+        for a in range(d):
+            layout[d + a], layout[2 * d + a] = c, math.floor((hi[a] - lo[a]) / c) + 1
     return True
 
 
 @nb.njit(cache=True)
-def small_limit(extent, layout):
+def small_limit(extent, layout, dim):
     """Largest diameter that counts as small: a cell less a margin covering the rounding of the
     cell index and of the box bounds (a few ulps of the largest coordinate involved)."""
-    x0, y0, x1, y1 = extent
-    far = max(abs(x0), abs(x1), abs(y0), abs(y1), abs(layout[OX]), abs(layout[OY]),
-              abs(layout[OX] + layout[NX] * layout[CW]), abs(layout[OY] + layout[NY] * layout[CH]))
-    c = min(layout[CW], layout[CH])
+    d = len(dim)
+    lo, hi = extent
+    far, c = 0.0, np.inf
+    for a in range(d):
+        end = layout[a] + layout[2 * d + a] * layout[d + a]
+        far = max(far, abs(lo[a]), abs(hi[a]), abs(layout[a]), abs(end))
+        c = min(c, layout[d + a])
+    if c == np.inf:  # cells as wide as a radius near the largest double: one cell holds every object
+        return c
     return c - ROUNDING_ULPS * np.finfo(np.float64).eps * (far + c)
 
 
 @nb.njit(cache=True)
-def grid_build(xy, radii, order, last_key, layout, limit, start, key, ids, centres, skey, sradii):
+def grid_build(xy, radii, order, last_key, layout, limit, start, key, ids, centres, skey, sradii, dim):
     """Counting sort of objects into cells (large ones into the last bucket), stable in `order`.
 
-    Keys live in a padded key space: rows of nx + 2 cells (an empty column on each side) and one
-    empty row on top, so the pair search needs no edge cases (each costs a branch per object).
-    Cell (cx, cy) has key cy * (nx + 2) + cx + 1; the large bucket has key (ny + 1) * (nx + 2),
-    and the objects not alive (radius NaN) the key after it.
-    `xy`, `radii` and `last_key` are per slot of `order` (this frame's centres, gathered; last
-    frame's slot radii and keys, or the input radii and -1s). Fills slot ids, centres (n, 2), keys
-    and radii, and `key` with the keys in `order` (it may be `last_key` itself). Every array is the
-    caller's, reused from frame to frame: fresh ones would cost a page fault per 4 KiB, at large n
-    more than the sort.
+    Keys as key_space says; the large bucket's follows the cells' and the objects not alive
+    (radius NaN) have the key after it. `xy`, `radii` and `last_key` are per slot of `order`
+    (this frame's centres, gathered; last frame's slot radii and keys, or the input radii and
+    -1s). Fills slot ids, centres (n, d), keys and radii, and `key` with the keys in `order` (it
+    may be `last_key` itself). Every array is the caller's, reused from frame to frame: fresh
+    ones would cost a page fault per 4 KiB, at large n more than the sort.
     Returns (bucket starts, objects that changed cell, keys they crossed): bucket k holds slots
     start[k]:start[k + 1]; `start` is reused when it has the size of this layout's key space.
     """
     n = order.shape[0]
-    space = key_space(layout)
+    space = key_space(layout, dim)
     large = space[-1]
     if start.shape[0] == large + 3:
         start[:] = 0
@@ -175,7 +253,7 @@ def grid_build(xy, radii, order, last_key, layout, limit, start, key, ids, centr
         start = np.zeros(large + 3, dtype=start.dtype)
     moved = shifts = 0
     for k in range(n):
-        c, c0 = cell_key(xy[k, 0], xy[k, 1], radii[k], limit, space), last_key[k]
+        c, c0 = cell_key(xy, k, radii[k], limit, space, dim), last_key[k]
         key[k] = c
         start[c] += 1
         if c != c0:
@@ -192,106 +270,144 @@ def grid_build(xy, radii, order, last_key, layout, limit, start, key, ids, centr
         s = start[c] - 1
         start[c] = s
         ids[s], skey[s], sradii[s] = order[k], c, radii[k]
-        centres[s, 0], centres[s, 1] = xy[k, 0], xy[k, 1]
+        for a in range(len(dim)):
+            centres[s, a] = xy[k, a]
     return start, moved, shifts  # now start[c] = first slot of bucket c
 
 
 @nb.njit(cache=True, inline="always")
-def scan_circles(centres, radii, ids, a, s, e, buf, count):
+def scan_circles(centres, radii, ids, a, s, e, buf, count, dim):
     """Test slot a against slots s..e-1, which hold centres and radii (or one radius for all, see
     common.radius_of), and emit the overlapping ones as pairs of `ids`; returns the new pair count.
     Each box is bounded as everywhere (x - r, x + r), a few flops that cost less than moving boxes
     twice the size through memory. Branch-free: every candidate is written at row `count`, which
     only a hit keeps. Scans are short and a good share of them hit, so a test-then-emit branch is
     mispredicted often: measured 1.9x slower on a quadtree's leaves."""
-    x, y, r = centres[a, 0], centres[a, 1], radius_of(radii, a)
-    ax0, ax1, ay0, ay1, i = x - r, x + r, y - r, y + r, ids[a]
+    box, i = box_of(centres, a, radius_of(radii, a), dim), ids[a]
     for b in range(s, e):
         emit(buf, count, i, ids[b])
-        x, y, r = centres[b, 0], centres[b, 1], radius_of(radii, b)
-        count += (max(ax0, x - r) <= min(ax1, x + r)) & (max(ay0, y - r) <= min(ay1, y + r))
+        count += _meets(box, centres, b, radius_of(radii, b), dim)
     return count
 
 
+def box_of(centres, a, r, dim):
+    """The box of radius r around row a of `centres`: (lo, hi) on each axis in turn, a tuple held
+    in registers through a scan."""
+
+
+@overload(box_of, inline="always")
+def _box_of(centres, a, r, dim):
+    if dim.count == 2:
+        def plane(centres, a, r, dim):
+            x, y = centres[a, 0], centres[a, 1]
+            return x - r, x + r, y - r, y + r
+        return plane
+
+    def space(centres, a, r, dim):
+        x, y, z = centres[a, 0], centres[a, 1], centres[a, 2]
+        return x - r, x + r, y - r, y + r, z - r, z + r
+    return space
+
+
 @nb.njit(cache=True, inline="always")
-def scan_circles_in_room(centres, radii, ids, a, s, e, buf, count):
+def _meets(box, centres, b, rb, dim):
+    """Whether `box` (box_of) overlaps the box of radius rb around slot b (closed intervals)."""
+    hit = True
+    for a in range(len(dim)):
+        x = centres[b, a]
+        hit &= max(box[2 * a], x - rb) <= min(box[2 * a + 1], x + rb)
+    return hit
+
+
+@nb.njit(cache=True, inline="always")
+def scan_circles_in_room(centres, radii, ids, a, s, e, buf, count, dim):
     """scan_circles where buf has a row for every test (the caller checked): no check per row,
     which cost 1.2x on the clustered scene at n = 131072, where there are 7 million tests."""
-    x, y, r = centres[a, 0], centres[a, 1], radius_of(radii, a)
-    ax0, ax1, ay0, ay1, i = x - r, x + r, y - r, y + r, ids[a]
+    box, i = box_of(centres, a, radius_of(radii, a), dim), ids[a]
     for b in range(s, e):
         j = ids[b]
         buf[count, 0], buf[count, 1] = min(i, j), max(i, j)
-        x, y, r = centres[b, 0], centres[b, 1], radius_of(radii, b)
-        count += (max(ax0, x - r) <= min(ax1, x + r)) & (max(ay0, y - r) <= min(ay1, y + r))
+        count += _meets(box, centres, b, radius_of(radii, b), dim)
     return count
 
 
 @nb.njit(cache=True, inline="always")
-def scan_in_room(centres, radius, ids, a, s, e, buf, count, vector):
+def scan_in_room(centres, radius, ids, a, s, e, buf, count, vector, dim):
     """Slot a against slots s..e-1 into a buf with room for all of them (plus SLACK_ROWS): LANES
-    at a time where `vector` and the scan is long enough, else one at a time."""
-    if vector and e - s >= VECTOR_FROM:
-        x, y, r = centres[a, 0], centres[a, 1], radius_of(radius, a)
-        return scan_compressed(centres, radius, ids, a, (x - r, x + r, y - r, y + r), s, e, buf, count)
-    return scan_circles_in_room(centres, radius, ids, a, s, e, buf, count)
+    at a time where `vector` (circles only) and the scan is long enough, else one at a time."""
+    if vector and len(dim) == 2 and e - s >= VECTOR_FROM:
+        box = box_of(centres, a, radius_of(radius, a), dim)
+        return scan_compressed(centres, radius, ids, a, (box[0], box[1], box[2], box[3]), s, e, buf, count)
+    return scan_circles_in_room(centres, radius, ids, a, s, e, buf, count, dim)
 
 
 @nb.njit(cache=True, inline="always")
-def small_against_small(ids, centres, radius, skey, start, w, first_large, vector, buf):
+def small_against_small(ids, centres, radius, skey, start, strides, first_large, vector, buf, dim):
     """The pairs among small objects: each slot against the later slots of its own cell and the
-    east cell, then the row above (NW, N, NE), which are contiguous slots. Thanks to the padding,
-    no edge cases. Returns (pairs found, pair tests)."""
+    east cell, then the runs of the half stencil beyond its row (`above`), each of contiguous
+    slots. Thanks to the padding, no edge cases. Returns (pairs found, pair tests)."""
     count = tests = 0
     rows = buf.shape[0] - SLACK_ROWS
+    runs = above(strides, dim)
     for a in range(first_large):
         c = skey[a]
-        e0, s, e = start[c + 2], start[c + w - 1], start[c + w + 2]
-        tests += e0 - a - 1 + e - s
-        if count + (e0 - a - 1) + (e - s) <= rows:
-            count = scan_in_room(centres, radius, ids, a, a + 1, e0, buf, count, vector)
-            count = scan_in_room(centres, radius, ids, a, s, e, buf, count, vector)
+        e0 = start[c + 2]
+        scans = e0 - a - 1
+        for k in runs:
+            scans += start[c + k + 3] - start[c + k]
+        tests += scans
+        if count + scans <= rows:
+            count = scan_in_room(centres, radius, ids, a, a + 1, e0, buf, count, vector, dim)
+            for k in runs:
+                count = scan_in_room(centres, radius, ids, a, start[c + k], start[c + k + 3], buf, count, vector, dim)
         else:
-            count = scan_circles(centres, radius, ids, a, a + 1, e0, buf, count)
-            count = scan_circles(centres, radius, ids, a, s, e, buf, count)
+            count = scan_circles(centres, radius, ids, a, a + 1, e0, buf, count, dim)
+            for k in runs:
+                count = scan_circles(centres, radius, ids, a, start[c + k], start[c + k + 3], buf, count, dim)
     return count, tests
 
 
 @nb.njit(cache=True)
-def grid_pairs(ids, centres, sradii, radius, skey, start, layout, limit, vector, buf):
+def grid_pairs(ids, centres, sradii, radius, skey, start, layout, limit, vector, dim, buf):
     """Box-overlap pairs into buf, each once; returns (pairs found, pair tests). `radius`: the
     slot radii again, or the one radius of every object (common.radius_of); `vector`: scan long
-    runs of slots LANES at a time (compress.py)."""
-    ox, oy, inv_x, inv_y, last_x, last_y, w, large = key_space(layout)
+    runs of slots LANES at a time (compress.py; circles only)."""
+    space = key_space(layout, dim)
+    strides, large = space[3], space[4]
     first_large, end_large = start[large], start[large + 1]  # the objects not alive after them
     # Inlined once per value of `vector`, each copy with it constant: a loop that tests it per
     # scan was 5% slower on the uniform scene at n = 131072, where few scans are long. The vector
     # scan reads the centres by column (compress.scan_block).
     if vector and centres.strides[0] == centres.itemsize:
-        count, tests = small_against_small(ids, centres, radius, skey, start, w, first_large, True, buf)
+        count, tests = small_against_small(ids, centres, radius, skey, start, strides, first_large, True, buf, dim)
     else:
-        count, tests = small_against_small(ids, centres, radius, skey, start, w, first_large, False, buf)
+        count, tests = small_against_small(ids, centres, radius, skey, start, strides, first_large, False, buf, dim)
     if first_large == end_large:
         return count, tests
     # Large against small: the cells their box grown by a small radius covers (covered_cells).
     reach = 0.5 * max(limit, 0.0)
+    cells, at = np.empty((2, len(dim)), dtype=np.int64), np.empty(len(dim), dtype=np.int64)
     for a in range(first_large, end_large):
-        cx0, cx1, cy0, cy1 = covered_cells(centres[a, 0], centres[a, 1], sradii[a] + reach, layout)
-        for cy in range(cy0, cy1 + 1):
-            s, e = start[cy * w + cx0 + 1], start[cy * w + cx1 + 2]
+        covered_cells(centres, a, sradii[a] + reach, space, cells, dim)
+        key, width = first_row(cells, at, space, dim), cells[1, 0] - cells[0, 0] + 1
+        for _ in range(rows_in(cells, dim)):
+            s, e = start[key], start[key + width]
             tests += e - s
-            count = scan_circles(centres, sradii, ids, a, s, e, buf, count)
-    return large_against_large(centres, sradii, ids, first_large, end_large, buf, count, tests)
+            count = scan_circles(centres, sradii, ids, a, s, e, buf, count, dim)
+            key = next_row(cells, at, key, space, dim)
+    return large_against_large(centres, sradii, ids, first_large, end_large, buf, count, tests, dim)
 
 
 @nb.njit(cache=True, inline="always")
-def covered_cells(x, y, reach, layout):
-    """Cells (cx0, cx1, cy0, cy1, inclusive) that a box of half-width `reach` around (x, y)
-    covers, plus one cell on each side, which absorbs the rounding of the cell index."""
-    ox, oy, inv_x, inv_y, last_x, last_y, w, large = key_space(layout)
-    cx0, cx1 = cell_of(x - reach, ox, inv_x, last_x), cell_of(x + reach, ox, inv_x, last_x)
-    cy0, cy1 = cell_of(y - reach, oy, inv_y, last_y), cell_of(y + reach, oy, inv_y, last_y)
-    return max(cx0 - 1, 0), min(cx1 + 1, int(last_x)), max(cy0 - 1, 0), min(cy1 + 1, int(last_y))
+def covered_cells(centres, k, reach, space, cells, dim):
+    """Into `cells` (2, d): the first and last cell on each axis (inclusive) that a box of
+    half-width `reach` around row k of `centres` covers, plus one cell on each side, which
+    absorbs the rounding of the cell index."""
+    origin, inverse, last = space[0], space[1], space[2]
+    for a in range(len(dim)):
+        x = centres[k, a]
+        cells[0, a] = max(cell_of(x - reach, origin[a], inverse[a], last[a]) - 1, 0)
+        cells[1, a] = min(cell_of(x + reach, origin[a], inverse[a], last[a]) + 1, int(last[a]))
 
 
 # The reach of a mover's box, grown by this share of itself and of its centre's distance from the
@@ -301,58 +417,105 @@ CELL_REACH_PAD = 1e-9
 
 
 @nb.njit(cache=True, inline="always")
-def reached_cells(x, y, reach, layout):
-    """Cells (cx0, cx1, cy0, cy1, inclusive) that hold every centre within `reach` of (x, y) along
-    each axis: cell_of is monotone, so the cells of the ends of a slightly grown reach bound them,
-    with no spare cell on each side (covered_cells's): on a Galton board, 1375 static tests a frame
-    instead of 3910."""
-    ox, oy, inv_x, inv_y, last_x, last_y, w, large = key_space(layout)
-    rx = reach + CELL_REACH_PAD * (reach + abs(x))
-    ry = reach + CELL_REACH_PAD * (reach + abs(y))
-    return (cell_of(x - rx, ox, inv_x, last_x), cell_of(x + rx, ox, inv_x, last_x),
-            cell_of(y - ry, oy, inv_y, last_y), cell_of(y + ry, oy, inv_y, last_y))
+def reached_cells(centre, reach, space, cells, dim):
+    """Into `cells` (2, d): the first and last cell on each axis (inclusive) that hold every centre
+    within `reach` of `centre` (a tuple) along each axis: cell_of is monotone, so the cells of the
+    ends of a slightly grown reach bound them, with no spare cell on each side (covered_cells's):
+    on a Galton board, 1375 static tests a frame instead of 3910."""
+    origin, inverse, last = space[0], space[1], space[2]
+    for a in range(len(dim)):
+        x = centre[a]
+        grown = reach + CELL_REACH_PAD * (reach + abs(x))
+        cells[0, a] = cell_of(x - grown, origin[a], inverse[a], last[a])
+        cells[1, a] = cell_of(x + grown, origin[a], inverse[a], last[a])
+
+
+@nb.njit(cache=True, inline="always")
+def first_row(cells, at, space, dim):
+    """The key of the first cell of the box of cells `cells` (covered_cells), and `at` (d) set to
+    its cell on each axis past x: the start of a walk over the box's rows (runs along x)."""
+    strides = space[3]
+    key = 1 + cells[0, 0]
+    for a in range(1, len(dim)):
+        at[a] = cells[0, a]
+        key += (at[a] + _padding(a, len(dim))) * strides[a]
+    return key
+
+
+@nb.njit(cache=True, inline="always")
+def next_row(cells, at, key, space, dim):
+    """The key of the first cell of the box's next row after the one starting at `key`, y fastest
+    (an odometer over the axes past x: no division per row); past the last row, the first's."""
+    strides = space[3]
+    for a in range(1, len(dim)):
+        if at[a] < cells[1, a]:
+            at[a] += 1
+            return key + strides[a]
+        key -= (at[a] - cells[0, a]) * strides[a]
+        at[a] = cells[0, a]
+    return key
+
+
+@nb.njit(cache=True, inline="always")
+def rows_in(cells, dim):
+    """Rows of cells (runs along x) in the box of cells `cells` (covered_cells)."""
+    rows = 1
+    for a in range(1, len(dim)):
+        rows *= cells[1, a] - cells[0, a] + 1
+    return rows
 
 
 @nb.njit(cache=True)
 def against_statics(q_ids, q_centres, q_radii, q_end, s_objects, s_centres, s_radii, s_start, s_layout, s_limit,
-                    s_bounds, buf):
+                    s_bounds, dim, buf):
     """Pairs of the moving objects in slots 0..q_end-1 of one grid (ids, centres, radii) with the
     statics of another grid, built once (its slots' object ids `s_objects`, the box around all of
-    them `s_bounds`): a mover whose box misses that box is skipped (a raindrop far above the
-    ground), the others are tested against the static cells their box grown by a small static's
-    radius covers, then against the large statics. Returns (pairs found, pair tests)."""
-    ox, oy, inv_x, inv_y, last_x, last_y, w, large = key_space(s_layout)
+    them `s_bounds`: lower corner, then upper): a mover whose box misses that box is skipped (a
+    raindrop far above the ground), the others are tested against the static cells their box
+    grown by a small static's radius covers, then against the large statics. Returns (pairs
+    found, pair tests)."""
+    d = len(dim)
+    space = key_space(s_layout, dim)
+    large = space[4]
     first_large, end_large = s_start[large], s_start[large + 1]
     reach = 0.5 * max(s_limit, 0.0)
-    bx0, by0, bx1, by1 = s_bounds
+    cells, at = np.empty((2, d), dtype=np.int64), np.empty(d, dtype=np.int64)
     count = tests = 0
     for q in range(q_end):
-        x, y, r, i = q_centres[q, 0], q_centres[q, 1], q_radii[q], q_ids[q]
-        if x + r < bx0 or x - r > bx1 or y + r < by0 or y - r > by1:
+        centre, r, i = row_of(q_centres, q, dim), q_radii[q], q_ids[q]
+        outside = False
+        for a in range(d):
+            outside |= (centre[a] + r < s_bounds[a]) | (centre[a] - r > s_bounds[d + a])
+        if outside:
             continue
-        cx0, cx1, cy0, cy1 = reached_cells(x, y, r + reach, s_layout)
-        for cy in range(cy0, cy1 + 1):
-            s, e = s_start[cy * w + cx0 + 1], s_start[cy * w + cx1 + 2]
+        reached_cells(centre, r + reach, space, cells, dim)
+        key, width = first_row(cells, at, space, dim), cells[1, 0] - cells[0, 0] + 1
+        for _ in range(rows_in(cells, dim)):
+            s, e = s_start[key], s_start[key + width]
+            key = next_row(cells, at, key, space, dim)
             tests += e - s
-            count = _scan_statics(x, y, r, i, s, e, s_objects, s_centres, s_radii, buf, count)
+            count = _scan_statics(centre, r, i, s, e, s_objects, s_centres, s_radii, buf, count, dim)
         tests += end_large - first_large
-        count = _scan_statics(x, y, r, i, first_large, end_large, s_objects, s_centres, s_radii, buf, count)
+        count = _scan_statics(centre, r, i, first_large, end_large, s_objects, s_centres, s_radii, buf, count, dim)
     return count, tests
 
 
 @nb.njit(cache=True, inline="always")
-def _scan_statics(x, y, r, i, s, e, s_objects, s_centres, s_radii, buf, count):
-    """Object i's box (centre x, y, radius r) against the static slots s..e-1; returns the count."""
+def _scan_statics(centre, r, i, s, e, s_objects, s_centres, s_radii, buf, count, dim):
+    """Object i's box (`centre`, radius r) against the static slots s..e-1; returns the count."""
     for b in range(s, e):
         within = r + s_radii[b]
-        if abs(s_centres[b, 0] - x) <= within and abs(s_centres[b, 1] - y) <= within:
+        near = True
+        for a in range(len(dim)):
+            near &= abs(s_centres[b, a] - centre[a]) <= within
+        if near:
             emit(buf, count, i, s_objects[b])
             count += 1
     return count
 
 
 @nb.njit(cache=True)
-def large_against_large(centres, sradii, ids, first_large, end, buf, count, tests):
+def large_against_large(centres, sradii, ids, first_large, end, buf, count, tests, dim):
     """Pairs among slots first_large..end-1 (the large bucket): a sweep along x, each candidate
     tested as a scan of one slot. Returns (pairs found, pair tests), counting on from the given ones."""
     lx = centres[first_large:end, 0] - sradii[first_large:end]
@@ -365,27 +528,29 @@ def large_against_large(centres, sradii, ids, first_large, end, buf, count, test
             if lx[by_x[v]] > hx:
                 break
             tests += 1
-            count = scan_circles(centres, sradii, ids, a, b, b + 1, buf, count)
+            count = scan_circles(centres, sradii, ids, a, b, b + 1, buf, count, dim)
     return count, tests
 
 
 @nb.njit(cache=True, inline="always")
-def _insert_slot(ids, centres, skey, sradii, a):
+def _insert_slot(ids, centres, skey, sradii, a, dim):
     """Move slot a's whole row back past the slots with a larger key; returns the rows moved."""
     k = skey[a]
-    i, r, x, y = ids[a], sradii[a], centres[a, 0], centres[a, 1]
+    i, r, centre = ids[a], sradii[a], row_of(centres, a, dim)
     b = a - 1
     while b >= 0 and skey[b] > k:
         ids[b + 1], skey[b + 1], sradii[b + 1] = ids[b], skey[b], sradii[b]
-        centres[b + 1, 0], centres[b + 1, 1] = centres[b, 0], centres[b, 1]
+        for t in range(len(dim)):
+            centres[b + 1, t] = centres[b, t]
         b -= 1
     ids[b + 1], skey[b + 1], sradii[b + 1] = i, k, r
-    centres[b + 1, 0], centres[b + 1, 1] = x, y
+    for t in range(len(dim)):
+        centres[b + 1, t] = centre[t]
     return a - 1 - b
 
 
 @nb.njit(cache=True)
-def _sort_slots(ids, centres, skey, sradii, descents, max_swaps):
+def _sort_slots(ids, centres, skey, sradii, descents, max_swaps, dim):
     """Insertion sort of the slots by key, each slot's whole row moving with it, given the slots
     whose key is below their predecessor's (`descents`, ascending): between two of them the keys
     already ascend, so only the descents and the slots after each one that fall out of order as it
@@ -397,7 +562,7 @@ def _sort_slots(ids, centres, skey, sradii, descents, max_swaps):
     for d in descents:
         a = max(d, done)
         while a < n and skey[a] < skey[a - 1]:
-            swaps += _insert_slot(ids, centres, skey, sradii, a)
+            swaps += _insert_slot(ids, centres, skey, sradii, a, dim)
             if swaps > max_swaps:
                 return -1
             a += 1
@@ -406,7 +571,7 @@ def _sort_slots(ids, centres, skey, sradii, descents, max_swaps):
 
 
 @nb.njit(cache=True)
-def grid_repair(layout, limit, start, descents, slots):
+def grid_repair(layout, limit, start, descents, slots, dim):
     """Last frame's slots (ids, centres, keys, radii) repaired in place for this frame, in the same
     layout, their centres already this frame's: the new keys, in last frame's slot order, are
     almost sorted, so an insertion sort that moves whole rows puts them in order, and each object
@@ -421,10 +586,10 @@ def grid_repair(layout, limit, start, descents, slots):
     object once, in part-sorted order, and `start` is stale."""
     ids, centres, skey, sradii = slots
     n = ids.shape[0]
-    space = key_space(layout)
+    space = key_space(layout, dim)
     moved = shifts = found = 0
     for a in range(n):
-        c = cell_key(centres[a, 0], centres[a, 1], sradii[a], limit, space)
+        c = cell_key(centres, a, sradii[a], limit, space, dim)
         c0 = skey[a]
         if c != c0:
             moved += 1
@@ -436,7 +601,7 @@ def grid_repair(layout, limit, start, descents, slots):
         # Every slot is written at the end of the list; only a descent (a key below the one before) keeps it.
         descents[found] = a
         found += (a > 0) and (c < skey[a - 1])
-    swaps = _sort_slots(ids, centres, skey, sradii, descents[:found], MAX_SWAPS_PER_OBJECT * n + 64)
+    swaps = _sort_slots(ids, centres, skey, sradii, descents[:found], MAX_SWAPS_PER_OBJECT * n + 64, dim)
     if swaps < 0:
         return moved, shifts, swaps
     if shifts > start.shape[0]:  # past that, counting the starts afresh costs less than shifting
@@ -450,7 +615,8 @@ def grid_repair(layout, limit, start, descents, slots):
 
 
 @nb.njit(cache=True)
-def grid_update(positions, radii, order, last_key, xy, p, cell, max_cells, layout, start, key, slots, spare, repair):
+def grid_update(positions, radii, order, last_key, xy, p, cell, max_cells, layout, start, key, slots, spare, repair,
+                dim):
     """One call per frame (each compiled call from Python costs microseconds): the layout, the
     small-object limit, and the slots (ids, centres, keys, radii) for this frame: `slots`
     repaired in place if `repair` and the layout is kept, else counting-sorted from `order` into
@@ -459,21 +625,44 @@ def grid_update(positions, radii, order, last_key, xy, p, cell, max_cells, layou
     Returns (relayout, limit, bucket starts, objects moved, keys they crossed, rows the repair
     moved): the rows are -1 after a counting sort, which leaves the slots in `spare`."""
     # A sequential pass first, which also brings the centres into cache for the gather.
-    extent = centre_extents(positions)
-    gather_centres(positions, order, xy)
-    relayout = grid_layout(extent, positions.shape[0], p, cell, max_cells, layout)
-    limit = small_limit(extent, layout)
+    extent = centre_extents(positions, dim)
+    gather_centres(positions, order, xy, dim)
+    relayout = grid_layout(extent, positions.shape[0], p, cell, max_cells, layout, 0.0, dim)
+    limit = small_limit(extent, layout, dim)
     if repair and not relayout:
-        moved, shifts, swaps = grid_repair(layout, limit, start, key, slots)
+        moved, shifts, swaps = grid_repair(layout, limit, start, key, slots, dim)
         if swaps >= 0:
             return relayout, limit, start, moved, shifts, swaps
         ids, centres, skey, sradii = slots  # count afresh from the part-sorted slots
-        start, _, _ = grid_build(centres, sradii, ids, skey, layout, limit, start, key, *spare)
+        start, _, _ = grid_build(centres, sradii, ids, skey, layout, limit, start, key, *spare, dim)
         return relayout, limit, start, moved, shifts, -1
     if relayout:
         last_key = np.full(positions.shape[0], -1, dtype=last_key.dtype)  # cells of another layout
-    start, moved, shifts = grid_build(xy, radii, order, last_key, layout, limit, start, key, *spare)
+    start, moved, shifts = grid_build(xy, radii, order, last_key, layout, limit, start, key, *spare, dim)
     return relayout, limit, start, moved, shifts, -1
+
+
+def key_strides(layout: np.ndarray, d: int) -> list[int]:
+    """The key stride of each axis in the padded key space (key_space, from Python)."""
+    strides = [1]
+    for a in range(1, d):
+        strides.append(strides[-1] * (int(layout[2 * d + a - 1]) + 2))
+    return strides
+
+
+def large_key(layout: np.ndarray, d: int) -> int:
+    """Key of the large bucket in the padded key space (key_space, from Python)."""
+    return (int(layout[3 * d - 1]) + 1) * key_strides(layout, d)[-1]
+
+
+def cell_keys(positions: np.ndarray, layout: np.ndarray) -> np.ndarray:
+    """The key of the cell holding each centre, derived in numpy apart from the kernels' cell_key,
+    for the validate checks."""
+    d = positions.shape[1]
+    origin, width, count = layout[:d], layout[d:2 * d], layout[2 * d:]
+    cell = np.clip(np.floor((positions - origin) * (1.0 / width)), 0, count - 1).astype(np.int64)
+    pad = np.array([1 if 0 < a < d - 1 else 0 for a in range(d)])
+    return 1 + (cell + pad) @ np.array(key_strides(layout, d))
 
 
 def default_cell(radii: np.ndarray) -> float:
@@ -519,13 +708,15 @@ class CellLayout(SmallScenes, BroadPhase):
         them all where the kernels can take it instead of the radii (`specialise`)."""
         self._cell = float(self.params["cell"]) if self.params["cell"] is not None else default_cell(radii)
         self._p = int(self.params["p"] or 0)
-        self._max_cells = MAX_CELLS_PER_OBJECT * self.n + 16
-        self._layout = np.zeros(6)
+        self._max_cells = MAX_CELLS_PER_OBJECT * self.n + CELLS_ROOM[self.dim]
+        self._layout = np.zeros(3 * self.dim)
         self._one = one_radius(radii) if self.params["specialise"] else None
         # What stats() says the kernels leave out for this scene.
         self._left_out = {} if self._one is None else {"left_out_radius_reads": 1}
 
     def structure(self):
+        if self.dim != 2:
+            return {}
         nx, ny = int(self._layout[NX]), int(self._layout[NY])
         ox, oy, cw, ch = self._layout[[OX, OY, CW, CH]]
         cx, cy = np.meshgrid(np.arange(nx), np.arange(ny))
@@ -569,6 +760,10 @@ class SquareGrid(CellLayout):
         self._statics: StaticCells | None = None
 
     def _reset(self, positions, radii):
+        if self.dim != 2 and self.params["vector"]:
+            raise ValueError(f"{self.name}: vector scans circles only (spheres are scanned one at a time)")
+        self._dim = marker(self.dim)
+        self._vector_now = self._vector and self.dim == 2
         self._start_layout(radii)
         n = self.n
         # Slot arrays (ids, centres, keys, radii), double-buffered: the build reads last frame's
@@ -584,11 +779,12 @@ class SquareGrid(CellLayout):
         held = np.arange(n, dtype=np.int64) if self._held is None else self._held
         m = len(held)
         self._build_statics(positions)
-        self._slots = (held.copy(), np.empty((m, 2), order="F"), np.full(m, -1, dtype=np.int64),
+        d = self.dim
+        self._slots = (held.copy(), np.empty((m, d), order="F"), np.full(m, -1, dtype=np.int64),
                        self._live_radii[held])
-        self._spare = (np.empty(m, dtype=np.int64), np.empty((m, 2), order="F"), np.empty(m, dtype=np.int64),
+        self._spare = (np.empty(m, dtype=np.int64), np.empty((m, d), order="F"), np.empty(m, dtype=np.int64),
                        np.empty(m))
-        self._key, self._xy = np.empty(m, dtype=np.int64), np.empty((m, 2), order="F")
+        self._key, self._xy = np.empty(m, dtype=np.int64), np.empty((m, d), order="F")
         self._input_order = held.copy()
         self._start = np.zeros(0, dtype=np.int64)
         self._repair = False
@@ -606,7 +802,7 @@ class SquareGrid(CellLayout):
             order, last_key, xy = self._input_order, self._key, self._xy
         relayout, self._limit, self._start, moved, shifts, swaps = grid_update(
             positions, radii, order, last_key, xy, self._p, self._cell, self._max_cells, self._layout,
-            self._start, self._key, self._slots, self._spare, self._repair,
+            self._start, self._key, self._slots, self._spare, self._repair, self._dim,
         )
         # Repair next frame while this frame's objects crossed fewer keys than there are: a
         # repair moves about (keys crossed) x (objects per key) rows, and shifts as many starts.
@@ -642,13 +838,13 @@ class SquareGrid(CellLayout):
 
     def _large_key(self) -> int:
         """Key of the large bucket in grid_build's padded key space."""
-        return int(key_space(self._layout)[-1])
+        return large_key(self._layout, self.dim)
 
     def _pairs(self):
         ids, centres, key, sradii = self._slots
         radius = sradii if self._one is None else self._one
         out, (tests,) = self._collect(grid_pairs, ids, centres, sradii, radius, key, self._start, self._layout,
-                                      self._limit, self._vector)
+                                      self._limit, self._vector_now, self._dim)
         self._counters["tests"] = tests
         if self._statics is not None:
             movers = self._start[self._large_key() + 1]  # the slots before the absent bucket
@@ -659,7 +855,8 @@ class SquareGrid(CellLayout):
     def stats(self):
         if not self._counters:  # nothing built yet
             return {}
-        return {"cells": int(self._layout[NX] * self._layout[NY]), "cell": float(self._layout[CW]),
+        d = self.dim
+        return {"cells": int(np.prod(self._layout[2 * d:])), "cell": float(self._layout[d]),
                 "large": int(self._start[self._large_key() + 1] - self._start[self._large_key()]),
                 **({"absent": len(self._slots[0]) - int(self._start[self._large_key() + 1])}
                    if self.alive is not None else {}),
@@ -668,7 +865,7 @@ class SquareGrid(CellLayout):
                 **self._counters, **self._left_out}
 
     def validate(self):
-        nx, ny = int(self._layout[NX]), int(self._layout[NY])
+        d = self.dim
         large = self._large_key()
         start, (ids, _, key, sradii) = self._start, self._slots
         held = np.arange(self.n) if self._held is None else self._held
@@ -679,24 +876,34 @@ class SquareGrid(CellLayout):
         assert np.array_equal(sradii, self._live_radii[ids], equal_nan=True), "slot radii are not the objects' radii"
         if self._statics is not None:
             self._statics.validate(self.static if self.alive is None else self.static & self.alive)
-        small = 2.0 * sradii <= self._limit
+        with np.errstate(over="ignore"):  # a radius near the largest double is small in a cell as wide
+            small = 2.0 * sradii <= self._limit
         assert np.array_equal(small, key < large), "an object is in the wrong bucket for its size"
-        assert self._limit < min(self._layout[CW], self._layout[CH]), "small objects could span two cells"
-        ox, oy, cw, ch = self._layout[[OX, OY, CW, CH]]
-        for s in np.flatnonzero(small):
-            x, y = self._positions[ids[s]]
-            cx, cy = cell_of(x, ox, 1.0 / cw, nx - 1.0), cell_of(y, oy, 1.0 / ch, ny - 1.0)
-            assert key[s] == cy * (nx + 2) + cx + 1, f"object {ids[s]} is not in the cell holding its centre"
+        narrowest = self._layout[d:2 * d].min()
+        assert self._limit < narrowest or narrowest == np.inf, "small objects could span two cells"
+        wrong = np.flatnonzero(key[small] != cell_keys(self._positions[ids[small]], self._layout))
+        assert not len(wrong), f"object {ids[small][wrong[0]] if len(wrong) else -1} is not in the cell holding its centre"
 
 
-class UniformGrid(CubesForSpheres, SquareGrid):
+class UniformGrid(SquareGrid):
     """Uniform grid of square cells over the centres, half-stencil pair search; over spheres, cubes.
 
-    Circles: see SquareGrid (`p`, `cell`, `coherent`, `specialise`, `vector`; statics and spawning
-    natively). Spheres (positions (n, 3)): cubes as wide as the largest sphere, the objects
-    counted into them every frame, the half-stencil search in 3D (own/grid3d.py); statics and
-    spawning there take the interface's generic way, and `p` and `cell` are not taken.
+    See SquareGrid (`p`, `cell`, `coherent`, `specialise`, `vector`; statics and spawning
+    natively): one source for both dimensions, compiled for each by the dimension's marker
+    (own/dimension.py); over spheres the half stencil is 13 of a cube's 26 neighbours, and the
+    vector scan (circles only) is not taken.
     """
+
+    dims = (2, 3)
+
+
+def grid_box_pairs(positions: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """Every pair whose boxes overlap (closed intervals), (i, j) with i < j, in no particular order:
+    own.grid's structure at every size, circles or spheres (the exact reference past brute force)."""
+    grid = UniformGrid()
+    grid.small_scene_n = 0
+    grid.reset(positions, radii)
+    return grid.pairs().copy()
 
 
 class StaticCells:
@@ -713,13 +920,15 @@ class StaticCells:
         self.objects = ids[self.grid._slots[0]]  # each static slot's object id
         reach = radii[ids, None]
         self.bounds = np.r_[(positions[ids] - reach).min(axis=0), (positions[ids] + reach).max(axis=0)]
+        self._dim = marker(positions.shape[1])
         self._collect = PairCollector()
 
     def pairs_with(self, q_ids: np.ndarray, q_centres: np.ndarray, q_radii: np.ndarray, q_end: int):
         """Pairs of the movers 0..q_end-1 (object ids, centres, radii) with the statics, and the tests made."""
         _, s_centres, _, s_radii = self.grid._slots
         out, (tests,) = self._collect(against_statics, q_ids, q_centres, q_radii, q_end, self.objects, s_centres,
-                                      s_radii, self.grid._start, self.grid._layout, self.grid._limit, self.bounds)
+                                      s_radii, self.grid._start, self.grid._layout, self.grid._limit, self.bounds,
+                                      self._dim)
         return out, tests
 
     def validate(self, held: np.ndarray) -> None:

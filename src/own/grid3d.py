@@ -1,5 +1,7 @@
-"""A uniform grid over spheres (positions (n, 3)): own.grid's work in 3D, and the exact box pairs
-of a 3D scene beyond the reach of brute force (own/reference.py).
+"""The cubes own.grid_parallel and own.grid_incremental take spheres (positions (n, 3)) through,
+until they are written once over the dimension as own.grid now is (own/grid.py): own.grid_parallel's
+frame over spheres (Cubes, its search split over every core) and the layout and keys of
+own.grid_incremental's kept candidates over spheres (own/grid_incremental3d.py).
 
 Cells are cubes at least as wide as the largest diameter, plus a margin that covers the rounding
 of the cell index, so that two objects whose boxes overlap lie in the same or neighbouring cells;
@@ -228,17 +230,8 @@ def cube_keys(positions: np.ndarray, layout: np.ndarray) -> np.ndarray:
     return cell[:, 2] * layer + (cell[:, 1] + 1) * w + cell[:, 0] + 1
 
 
-def grid3_box_pairs(positions: np.ndarray, radii: np.ndarray) -> np.ndarray:
-    """Every pair whose boxes overlap (closed intervals), (i, j) with i < j, in no particular order."""
-    if len(positions) < 2:
-        return np.empty((0, 2), dtype=np.int64)
-    cubes = Cubes(radii)
-    cubes.update(positions)
-    return cubes.pairs().copy()
-
-
 class Cubes:
-    """own.grid's work over spheres: the layout kept while it fits the centres, the objects
+    """A plain grid of cubes over spheres: the layout kept while it fits the centres, the objects
     counted into their cells every frame, taken in last frame's slot order, and the half-stencil
     search; with `chunks`, the search split into that many parts that run in parallel
     (own.grid_parallel). (The 2D grid's repair of last frame's slots, its bucket for large objects
@@ -299,7 +292,7 @@ class Cubes:
 
 
 class CubesForSpheres:
-    """Mixin, first in the bases of our grids (own.grid, own.grid_incremental, own.grid_parallel):
+    """Mixin, first in the bases of own.grid_incremental and own.grid_parallel:
     over spheres the frame is new_cubes()' work (Cubes, with `cube_chunks()` parts searched in
     parallel, 0: one thread; own.grid_incremental's kept candidates); over circles the grid's own.
     Statics and spawning of spheres take the interface's generic way, and `p` and `cell` are

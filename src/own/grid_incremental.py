@@ -23,8 +23,8 @@ import numpy as np
 
 from .common import PairCollector, centre_extents, emit, radius_of
 from .dimension import CIRCLES
-from .grid import (CellLayout, SquareGrid, cell_key, covered_cells, gather_centres, grid_layout, key_space,
-                   large_against_large, small_limit)
+from .grid import (NX, CellLayout, SquareGrid, cell_key, covered_cells, first_row, gather_centres, grid_layout,
+                   key_space, large_against_large, large_key, next_row, rows_in, small_limit)
 from .grid3d import CubesForSpheres
 from .grid_incremental3d import IncrementalCubes
 from .kept_lists import (LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT, add_candidate,
@@ -54,14 +54,14 @@ def incremental_rebuild(positions, radii, layout, limit, state, head, cand):
     number of candidates; when it exceeds cand's rows, the caller must grow cand and rebuild."""
     perm, rank, xy, sr, rkey, nxt, prv, okey = unpack(state)
     n = positions.shape[0]
-    space = key_space(layout)
-    w = space[6]
+    space = key_space(layout, CIRCLES)
+    w = space[3][1]
     # A counting sort by key, stable in object order (mergesort's order), in `head` before it holds
     # the lists: O(n + cells) where argsort took 0.4 of a 0.65 ms rebuild at n = 4096.
-    large = space[7]
+    large = space[4]
     head[:large + 2] = 0
     for i in range(n):
-        okey[i] = cell_key(positions[i, 0], positions[i, 1], radii[i], limit, space)
+        okey[i] = cell_key(positions, i, radii[i], limit, space, CIRCLES)
         head[okey[i] + 1] += 1
     for c in range(1, large + 2):
         head[c] += head[c - 1]
@@ -69,7 +69,7 @@ def incremental_rebuild(positions, radii, layout, limit, state, head, cand):
         c = okey[i]
         perm[head[c]] = i
         head[c] += 1
-    gather_centres(positions, perm, xy)
+    gather_centres(positions, perm, xy, CIRCLES)
     for a in range(n):
         rank[perm[a]] = a
         sr[a] = radii[perm[a]]
@@ -129,8 +129,8 @@ def incremental_update(positions, radius, limit, layout, state, head, cand, m, m
     past cand's rows also asks for a rebuild, into a bigger cand."""
     perm, rank, xy, sr, rkey, nxt, prv, okey = unpack(state)
     n = perm.shape[0]
-    space = key_space(layout)
-    w, large = space[6], space[7]
+    space = key_space(layout, CIRCLES)
+    w, large = space[3][1], space[4]
     # One pass in input order: centres stored by rank, and the cell compared with the object's
     # last. Stores by rank, not loads: a missed store does not hold up the loop, a missed load does
     # (1.6x faster than gathering by rank at n = 2^20). The movers are found in the same pass, from
@@ -140,7 +140,7 @@ def incremental_update(positions, radius, limit, layout, state, head, cand, m, m
     for i in range(n):
         a, x, y = rank[i], positions[i, 0], positions[i, 1]
         xy[a, 0], xy[a, 1] = x, y
-        c = cell_key(x, y, radius_of(radius, i), limit, space)
+        c = cell_key(positions, i, radius_of(radius, i), limit, space, CIRCLES)
         if c != okey[i]:  # a branch, not a branch-free append: 1 in 100 moves (1.4x faster, measured)
             movers[k, 0], movers[k, 1] = a, c
             k += 1
@@ -162,8 +162,8 @@ def incremental_update(positions, radius, limit, layout, state, head, cand, m, m
 def head_length(layout):
     """Entries of the lists' heads: they are indexed by key + row width, so that the row below the
     grid is empty too."""
-    w, large = key_space(layout)[6:]
-    return large + 1 + w
+    space = key_space(layout, CIRCLES)
+    return space[4] + 1 + space[3][1]
 
 
 @nb.njit(cache=True)
@@ -177,9 +177,9 @@ def incremental_step(positions, radii, radius, p, cell, max_cells, layout, state
     head_length(layout) entries (it is not rebuilt then): the caller grows them and calls
     incremental_rebuild. (Handing an array back to Python would cost 0.4 us a call.)"""
     n = positions.shape[0]
-    extent = centre_extents(positions)
-    relayout = grid_layout(extent, n, p, cell, max_cells, layout, LAYOUT_SLACK_CELLS)
-    limit = small_limit(extent, layout)
+    extent = centre_extents(positions, CIRCLES)
+    relayout = grid_layout(extent, n, p, cell, max_cells, layout, LAYOUT_SLACK_CELLS, CIRCLES)
+    limit = small_limit(extent, layout, CIRCLES)
     if not relayout and m >= 0:
         m, moved_now = incremental_update(positions, radius, limit, layout, state, head, cand, m, movers, moved,
                                           max_movers)
@@ -233,23 +233,27 @@ def large_pairs(state, head, layout, limit, buf, count, tests):
     tests), counting on from the given ones."""
     perm, rank, xy, sr, rkey, nxt, prv, okey = unpack(state)
     n = perm.shape[0]
-    space = key_space(layout)
-    w, large = space[6], space[7]
+    space = key_space(layout, CIRCLES)
+    w, large = space[3][1], space[4]
     first_large = first_large_rank(rkey, large)
     if first_large == n:
         return count, tests
     reach = 0.5 * max(limit, 0.0)
+    cells, at = np.empty((2, 2), dtype=np.int64), np.empty(2, dtype=np.int64)
     for a in range(first_large, n):  # against the small objects in the cells they cover
-        cx0, cx1, cy0, cy1 = covered_cells(xy[a, 0], xy[a, 1], sr[a] + reach, layout)
-        for cy in range(cy0, cy1 + 1):
-            for cx in range(cx0, cx1 + 1):
-                b = head[cy * w + cx + 1 + w]
+        covered_cells(xy, a, sr[a] + reach, space, cells, CIRCLES)
+        key, width = first_row(cells, at, space, CIRCLES), cells[1, 0] - cells[0, 0] + 1
+        for _ in range(rows_in(cells, CIRCLES)):
+            s, e = key, key + width
+            key = next_row(cells, at, key, space, CIRCLES)
+            for c in range(s, e):
+                b = head[c + w]
                 while b >= 0:
                     emit(buf, count, perm[a], perm[b])
                     count += boxes_overlap(xy, sr, a, b, CIRCLES)
                     tests += 1
                     b = nxt[b]
-    return large_against_large(xy, sr, perm, first_large, perm.shape[0], buf, count, tests)
+    return large_against_large(xy, sr, perm, first_large, perm.shape[0], buf, count, tests, CIRCLES)
 
 
 class IncrementalSquares(StaticsApart, CellLayout):
@@ -402,7 +406,7 @@ class IncrementalSquares(StaticsApart, CellLayout):
             return
         perm, rank, xy, sr, rkey, nxt, prv, okey = unpack(self._state)
         head = self._head
-        w, large = key_space(self._layout)[6:]
+        w, large = int(self._layout[NX]) + 2, large_key(self._layout, 2)
         assert np.array_equal(np.sort(perm), np.arange(self.n)), "ranks are not a permutation"
         assert np.array_equal(rank[perm], np.arange(self.n)), "object -> rank is not perm's inverse"
         assert np.array_equal(okey[perm], rkey), "the objects' keys are not their ranks' keys"

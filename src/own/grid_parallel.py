@@ -24,7 +24,7 @@ import numpy as np
 
 from .common import PairCollector, radius_of
 from .dimension import CIRCLES
-from .grid import cell_key, grid_layout, key_space, small_limit
+from .grid import NX, cell_key, grid_layout, key_space, small_limit
 from .grid3d import CubesForSpheres
 from .grid_incremental import (IncrementalSquares, add_neighbours, first_large_rank, head_length, incremental_rebuild,
                                large_pairs)
@@ -45,6 +45,30 @@ def _span(c, chunks, n):
     return c * n // chunks, (c + 1) * n // chunks
 
 
+@nb.njit(cache=True)
+def _chunk_movers(positions, lo, hi, radius, limit, layout, rank, xy, okey, movers):
+    """Objects lo..hi-1's centres stored by rank, and those that changed cell listed in `movers`
+    from row lo; returns how many. Compiled apart and called per chunk: own.grid's key_space and
+    cell_key, inlined into a function with a parallel loop, hand it tuples of the axes that
+    numba's parallel loops cannot take ("non scalar argument")."""
+    space = key_space(layout, CIRCLES)
+    k = lo
+    for i in range(lo, hi):
+        a = rank[i]
+        xy[a, 0], xy[a, 1] = positions[i, 0], positions[i, 1]
+        key = cell_key(positions, i, radius_of(radius, i), limit, space, CIRCLES)
+        if key != okey[i]:
+            movers[k, 0], movers[k, 1] = a, key
+            k += 1
+    return k - lo
+
+
+@nb.njit(cache=True)
+def large_key_of(layout):
+    """Key of the large bucket over circles (own.grid's key_space)."""
+    return key_space(layout, CIRCLES)[4]
+
+
 @nb.njit(cache=True, parallel=True)
 def chunked_update(positions, radius, limit, layout, state, head, cand, counts, movers, found, moved, max_movers):
     """incremental_update with the candidates in chunks: returns (candidates, movers), or
@@ -52,19 +76,10 @@ def chunked_update(positions, radius, limit, layout, state, head, cand, counts, 
     a chunk with no room for its new candidates)."""
     perm, rank, xy, sr, rkey, nxt, prv, okey = unpack(state)
     n, chunks, rows = perm.shape[0], counts.shape[0], cand.shape[1]
-    space = key_space(layout)
-    w, large = space[6], space[7]
+    w, large = int(layout[NX]) + 2, large_key_of(layout)
     for c in nb.prange(chunks):  # centres stored by rank, and each chunk's movers from its first row
         lo, hi = _span(c, chunks, n)
-        k = lo
-        for i in range(lo, hi):
-            a, x, y = rank[i], positions[i, 0], positions[i, 1]
-            xy[a, 0], xy[a, 1] = x, y
-            key = cell_key(x, y, radius_of(radius, i), limit, space)
-            if key != okey[i]:
-                movers[k, 0], movers[k, 1] = a, key
-                k += 1
-        found[c] = k - lo
+        found[c] = _chunk_movers(positions, lo, hi, radius, limit, layout, rank, xy, okey, movers)
     total = 0
     for c in range(chunks):
         total += found[c]
@@ -114,10 +129,10 @@ def deal(flat, m, cand, counts):
 
 @nb.njit(cache=True, parallel=True)
 def chunked_extents(positions, chunks):
-    """common.centre_extents, each chunk of the centres on its own core."""
+    """common.centre_extents over circles, each chunk of the centres on its own core."""
     n = positions.shape[0]
     if n == 0:
-        return 0.0, 0.0, 0.0, 0.0
+        return (0.0, 0.0), (0.0, 0.0)
     part = np.empty((chunks, 4))
     for c in nb.prange(chunks):
         lo, hi = _span(c, chunks, n)
@@ -128,7 +143,7 @@ def chunked_extents(positions, chunks):
             x0, x1 = min(x0, x), max(x1, x)
             y0, y1 = min(y0, y), max(y1, y)
         part[c, 0], part[c, 1], part[c, 2], part[c, 3] = x0, y0, x1, y1
-    return part[:, 0].min(), part[:, 1].min(), part[:, 2].max(), part[:, 3].max()
+    return (part[:, 0].min(), part[:, 1].min()), (part[:, 2].max(), part[:, 3].max())
 
 
 @nb.njit(cache=True)
@@ -139,8 +154,8 @@ def chunked_step(positions, radii, radius, p, cell, max_cells, layout, state, he
     must grow head, flat or cand and rebuild (see incremental_step)."""
     n = positions.shape[0]
     extent = chunked_extents(positions, counts.shape[0])
-    relayout = grid_layout(extent, n, p, cell, max_cells, layout, LAYOUT_SLACK_CELLS)
-    limit = small_limit(extent, layout)
+    relayout = grid_layout(extent, n, p, cell, max_cells, layout, LAYOUT_SLACK_CELLS, CIRCLES)
+    limit = small_limit(extent, layout, CIRCLES)
     if not relayout and m >= 0:
         m, moved_now = chunked_update(positions, radius, limit, layout, state, head, cand, counts, movers, found, moved,
                                       max_movers)
@@ -188,7 +203,7 @@ def chunked_pairs(state, radius, cand, counts, hits, found, buf):
 def has_large(state, layout):
     """Whether any object is large (they are the last ranks)."""
     rkey = state[0][2]
-    return first_large_rank(rkey, key_space(layout)[7]) < rkey.shape[0]
+    return first_large_rank(rkey, large_key_of(layout)) < rkey.shape[0]
 
 
 @nb.njit(cache=True)

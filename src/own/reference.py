@@ -9,8 +9,8 @@ import numpy as np
 
 from interface.base import PairArray
 
-# Above this many objects brute force is too slow; the exact grid (own.grid in 2D, own/grid3d.py in
-# 3D: each tested equal to brute force on random and adversarial scenes) takes over.
+# Above this many objects brute force is too slow; the exact grid (own.grid, circles or spheres:
+# tested equal to brute force on random and adversarial scenes) takes over.
 BRUTE_FORCE_LIMIT = 3000
 
 
@@ -26,16 +26,9 @@ def box_pairs(positions: np.ndarray, radii: np.ndarray, alive: np.ndarray | None
         from .brute import brute_pairs
 
         return brute_pairs(positions, radii)
-    if positions.shape[1] == 3:
-        from .grid3d import grid3_box_pairs
+    from .grid import grid_box_pairs
 
-        found = grid3_box_pairs(positions, radii)
-        return found[np.lexsort((found[:, 1], found[:, 0]))]
-    from .grid import UniformGrid
-
-    grid = UniformGrid()
-    grid.reset(positions, radii)
-    found = grid.pairs()
+    found = grid_box_pairs(positions, radii)
     return found[np.lexsort((found[:, 1], found[:, 0]))]
 
 
