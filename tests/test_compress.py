@@ -9,6 +9,7 @@ import engines
 from interface.pairs import keys
 from own.brute import brute_pairs
 from own.compress import SLACK_ROWS
+from own.dimension import CIRCLES
 from own.grid import grid_pairs
 from scenes import generate
 
@@ -27,11 +28,11 @@ def test_the_pair_kernel_never_writes_past_its_buffer_and_is_exact_where_the_pai
     scene = generate("clusters", 300, seed=1, box=(0.0, 0.0, 300.0, 300.0))
     _, args = dense_grid(scene.positions, scene.radii)
     expected = np.sort(keys(brute_pairs(scene.positions, scene.radii), 300))
-    total, _ = grid_pairs(*args, vector, np.empty((len(expected) + SLACK_ROWS, 2), dtype=np.int64))
+    total, _ = grid_pairs(*args, vector, CIRCLES, np.empty((len(expected) + SLACK_ROWS, 2), dtype=np.int64))
     assert total == len(expected)
     for rows in [*range(0, 40), *range(total - 20, total + 3 * SLACK_ROWS)]:
         memory = np.full((rows + 64, 2), -7, dtype=np.int64)
-        count, _ = grid_pairs(*args, vector, memory[:rows])
+        count, _ = grid_pairs(*args, vector, CIRCLES, memory[:rows])
         assert count == total  # every pair counted, whether it fitted or not
         assert (memory[rows:] == -7).all(), f"wrote past a buffer of {rows} rows"
         if count <= rows:
@@ -46,7 +47,7 @@ def test_centres_stored_by_row_take_the_scalar_scan_with_the_same_pairs():
     found = {}
     for name, centres in (("columns", args[1]), ("rows", by_row)):
         buf = np.empty((200000, 2), dtype=np.int64)
-        count, _ = grid_pairs(args[0], centres, *args[2:], True, buf)
+        count, _ = grid_pairs(args[0], centres, *args[2:], True, CIRCLES, buf)
         found[name] = np.sort(keys(buf[:count], 500))
     np.testing.assert_array_equal(found["columns"], found["rows"])
     np.testing.assert_array_equal(found["columns"], np.sort(keys(brute_pairs(scene.positions, scene.radii), 500)))

@@ -309,14 +309,25 @@ def _box_of(centres, a, r, dim):
     return space
 
 
-@nb.njit(cache=True, inline="always")
 def _meets(box, centres, b, rb, dim):
     """Whether `box` (box_of) overlaps the box of radius rb around slot b (closed intervals)."""
-    hit = True
-    for a in range(len(dim)):
-        x = centres[b, a]
-        hit &= max(box[2 * a], x - rb) <= min(box[2 * a + 1], x + rb)
-    return hit
+
+
+@overload(_meets, inline="always")
+def _meets_in(box, centres, b, rb, dim):
+    # Written out per dimension: as a loop over the axes indexing the box's tuple, the pair
+    # search over circles measured 3 to 8% slower.
+    if dim.count == 2:
+        def plane(box, centres, b, rb, dim):
+            x, y = centres[b, 0], centres[b, 1]
+            return (max(box[0], x - rb) <= min(box[1], x + rb)) & (max(box[2], y - rb) <= min(box[3], y + rb))
+        return plane
+
+    def space(box, centres, b, rb, dim):
+        x, y, z = centres[b, 0], centres[b, 1], centres[b, 2]
+        return (max(box[0], x - rb) <= min(box[1], x + rb)) & (max(box[2], y - rb) <= min(box[3], y + rb)) \
+            & (max(box[4], z - rb) <= min(box[5], z + rb))
+    return space
 
 
 @nb.njit(cache=True, inline="always")
@@ -345,24 +356,31 @@ def scan_in_room(centres, radius, ids, a, s, e, buf, count, vector, dim):
 def small_against_small(ids, centres, radius, skey, start, strides, first_large, vector, buf, dim):
     """The pairs among small objects: each slot against the later slots of its own cell and the
     east cell, then the runs of the half stencil beyond its row (`above`), each of contiguous
-    slots. Thanks to the padding, no edge cases. Returns (pairs found, pair tests)."""
+    slots. Thanks to the padding, no edge cases. Returns (pairs found, pair tests). The first run
+    above (the only one in 2D) is loaded once into locals; as one more turn of the loop over the
+    runs, the search over circles measured 2 to 5% slower."""
     count = tests = 0
     rows = buf.shape[0] - SLACK_ROWS
     runs = above(strides, dim)
+    up, more = runs[0], np.empty(len(runs) - 1, dtype=np.int64)  # the runs past the first (3D)
+    for t in range(1, len(runs)):
+        more[t - 1] = runs[t]
     for a in range(first_large):
         c = skey[a]
-        e0 = start[c + 2]
-        scans = e0 - a - 1
-        for k in runs:
+        e0, s, e = start[c + 2], start[c + up], start[c + up + 3]
+        scans = e0 - a - 1 + e - s
+        for k in more:
             scans += start[c + k + 3] - start[c + k]
         tests += scans
         if count + scans <= rows:
             count = scan_in_room(centres, radius, ids, a, a + 1, e0, buf, count, vector, dim)
-            for k in runs:
+            count = scan_in_room(centres, radius, ids, a, s, e, buf, count, vector, dim)
+            for k in more:
                 count = scan_in_room(centres, radius, ids, a, start[c + k], start[c + k + 3], buf, count, vector, dim)
         else:
             count = scan_circles(centres, radius, ids, a, a + 1, e0, buf, count, dim)
-            for k in runs:
+            count = scan_circles(centres, radius, ids, a, s, e, buf, count, dim)
+            for k in more:
                 count = scan_circles(centres, radius, ids, a, start[c + k], start[c + k + 3], buf, count, dim)
     return count, tests
 
