@@ -465,16 +465,19 @@ def _incremental_frames(grid, frames, radii):
     return searched_plain
 
 
-def test_grid_incremental_searches_plain_where_kept_candidates_do_not_pay_and_keeps_them_again_after(monkeypatch):
+@pytest.mark.parametrize(("dim", "side"), [(2, 40), (3, 12)])
+def test_grid_incremental_searches_plain_where_kept_candidates_do_not_pay_and_keeps_them_again_after(
+        monkeypatch, dim, side):
     monkeypatch.setattr(grid_incremental, "KEEP_AFTER_QUIET_FRAMES", 3)
     rng = np.random.default_rng(5)
-    # A packed block (about 8 candidates an object, as in a settled pile), jittering in place ...
-    side = 40
-    packed = np.stack(np.meshgrid(np.arange(side), np.arange(side)), axis=-1).reshape(-1, 2) * 1.6
+    # A packed block (about 8 candidates an object over circles, as in a settled pile; 26 over
+    # spheres), jittering in place ...
+    packed = np.stack(np.meshgrid(*[np.arange(side)] * dim), axis=-1).reshape(-1, dim) * 1.6
     radii = np.full(len(packed), 1.0)
     grid = engines.create("own.grid_incremental")
     grid.reset(packed, radii)
-    assert grid.stats()["plain_search"] == 0 and grid.stats()["candidates"] > 2 * len(packed)
+    most = grid_incremental.KEEP_MAX_CANDIDATES_PER_OBJECT[dim] * len(packed)
+    assert grid.stats()["plain_search"] == 0 and grid.stats()["candidates"] > most
     # (the block's edge rows and columns stay put, so that the extent, and the grid's layout, do).
     inner = ((packed > 0) & (packed < packed.max())).all(axis=1)[:, None]
     jitter = [packed + inner * rng.normal(0.0, 0.01, packed.shape) for _ in range(3)]

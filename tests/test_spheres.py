@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 import engines
 from interface.checks import check_positions
 from interface.pairs import is_canonical, keys
-from own import grid_incremental3d
+from own import grid_incremental
 from own.brute import brute_pairs
 from own.grid import grid_box_pairs
 from own.reference import BRUTE_FORCE_LIMIT, box_pairs, circle_pairs, narrow_phase
@@ -153,7 +153,7 @@ def test_our_sphere_backends_take_statics_and_spawning_exactly(name):
         np.testing.assert_array_equal(np.sort(keys(backend.pairs(), n)), keys(expected, n))
 
 
-def test_our_grid_takes_p_cell_statics_and_large_spheres_and_the_kept_grids_refuse_p_and_cell_in_one_line():
+def test_our_grid_takes_p_cell_statics_and_large_spheres_and_refuses_the_vector_scan_in_one_line():
     rng = np.random.default_rng(9)
     positions, radii = rng.uniform(0, 100, (800, 3)), rng.uniform(0.5, 3.0, 800)
     radii[:4] = 30.0  # wider than a cell: the large bucket
@@ -168,8 +168,27 @@ def test_our_grid_takes_p_cell_statics_and_large_spheres_and_the_kept_grids_refu
         np.testing.assert_array_equal(np.sort(keys(grid.pairs(), 800)), keys(expected, 800))
     with pytest.raises(ValueError, match=r"^own.grid: vector scans circles only"):
         engines.create("own.grid", vector=True).reset(positions, radii)
-    with pytest.raises(ValueError, match=r"^own.grid_incremental: p and cell are not taken over spheres yet"):
-        engines.create("own.grid_incremental", cell=5.0).reset(np.zeros((3, 3)), np.ones(3))
+
+
+@pytest.mark.parametrize(("name", "params"), [("own.grid_incremental", {"candidates": "kept"}),
+                                              ("own.grid_parallel", {"parallel_from": 0})])
+def test_the_kept_grids_take_p_cell_statics_and_large_spheres(name, params):
+    rng = np.random.default_rng(9)
+    positions, radii = rng.uniform(0, 100, (800, 3)), rng.uniform(0.5, 3.0, 800)
+    radii[:4] = 30.0  # wider than a cell: found afresh every frame
+    static = rng.random(800) < 0.4
+    for extra in ({}, {"p": 6}, {"cell": 9.0}):
+        grid = engines.create(name, **params, **extra)
+        grid.small_scene_n = 0
+        grid.reset(positions, radii, static=static)
+        moved = positions.copy()
+        for step in range(3):
+            moved[~static] += rng.normal(0.0, 1.0, ((~static).sum(), 3))
+            grid.update(moved)
+            grid.validate()
+            assert grid._static_cells is not None and len(grid._static_cells.ids) == static.sum()  # statics apart
+            np.testing.assert_array_equal(np.sort(keys(grid.pairs(), 800)),
+                                          keys(box_pairs(moved, radii, static=static), 800))
 
 
 def test_our_sweep_and_prune_works_in_3d_along_the_axis_asked():
@@ -244,19 +263,17 @@ def test_the_3d_grid_stays_small_on_a_line_of_spheres():
     assert len(grid.pairs()) == 0
 
 
-@pytest.mark.parametrize("per_cell", [0.0, 3.0])
-def test_the_3d_grid_split_over_every_core_finds_what_one_thread_does(per_cell):
-    from own.grid3d import Cubes
-    from own.parallel import chunk_count
-
+@pytest.mark.parametrize("params", [{}, {"cell": 3.0}])
+def test_the_3d_grid_split_over_every_core_finds_what_one_thread_does(params):
     rng = np.random.default_rng(6)
     positions = rng.uniform(0, 150, (3000, 3))
     positions[:500] = rng.normal(75, 4, (500, 3))  # a clump: chunks with many more pairs than others
     radii = np.exp(rng.uniform(np.log(0.5), np.log(4.0), 3000))
     expected = keys(brute_pairs(positions, radii), 3000)
-    parallel = engines.create("own.grid_parallel", parallel_from=0)
+    parallel = engines.create("own.grid_parallel", parallel_from=0, **params)
     parallel.reset(positions, radii)
     assert parallel.stats()["parallel"] == 1
+    np.testing.assert_array_equal(np.sort(keys(parallel.pairs(), 3000)), expected)
     for step in range(3):
         moved = positions + step * rng.normal(0, 0.5, positions.shape)
         parallel.update(moved)
@@ -264,10 +281,6 @@ def test_the_3d_grid_split_over_every_core_finds_what_one_thread_does(per_cell):
         got = parallel.pairs()
         assert is_canonical(got, 3000) is None
         np.testing.assert_array_equal(np.sort(keys(got, 3000)), keys(brute_pairs(moved, radii), 3000))
-    cubes = Cubes(radii, per_cell=per_cell, chunks=chunk_count())
-    cubes.update(positions)
-    cubes.validate()
-    np.testing.assert_array_equal(np.sort(keys(cubes.pairs(), 3000)), expected)
 
 
 def test_the_z_axis_is_for_spheres_only():
@@ -279,7 +292,7 @@ def test_the_z_axis_is_for_spheres_only():
 
 
 def _incremental_over_spheres(positions, radii, **params):
-    grid = engines.create("own.grid_incremental", **params)
+    grid = engines.create("own.grid_incremental", candidates="kept", **params)
     grid.small_scene_n = 0  # the structure at every n
     grid.reset(positions, radii)
     return grid
@@ -308,7 +321,7 @@ def test_the_incremental_grid_over_spheres_updates_its_candidates_while_few_obje
 
 
 def test_the_incremental_grid_over_spheres_renumbers_its_objects_after_enough_moves(monkeypatch):
-    monkeypatch.setattr(grid_incremental3d, "RENEW_AFTER_MOVES_PER_OBJECT", 0)  # after any move
+    monkeypatch.setattr(grid_incremental, "RENEW_AFTER_MOVES_PER_OBJECT", 0)  # after any move
     traj = simulate(at_essay_density("uniform", 3000, seed=5, dim=3), frames=4)
     grid = _incremental_over_spheres(traj.positions[0], traj.scene.radii)
     rebuilt = []
@@ -355,7 +368,7 @@ def test_the_incremental_grid_over_spheres_reads_one_radius_only_where_asked(spe
     rng = np.random.default_rng(3)
     positions, radii = rng.uniform(0.0, 80.0, (800, 3)), np.full(800, 2.5)
     grid = _incremental_over_spheres(positions, radii, specialise=specialise)
-    assert isinstance(grid._cubes._radius, float) == specialise
+    assert isinstance(grid._radius, float) == specialise
     assert ("left_out_radius_reads" in grid.stats()) == specialise  # bench times the general kernels beside
     for step in range(3):
         positions = positions + rng.normal(0.0, 1.0, positions.shape)

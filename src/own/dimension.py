@@ -11,10 +11,9 @@ kind between dimensions (a stencil of cells, a bit interleave) is picked the sam
 marker's type, with `numba.extending.overload`.
 
 A structure takes its marker at reset, from the dimension the interface found there (`self.dim`),
-and hands it to its kernels, which then hold no test of the dimension of their own. (The kept-candidate
-grids' cubes, own/grid3d.py and own/grid_incremental3d.py, are still written per dimension; the
-sweep's strips and columns, own/strips.py and own/columns.py, differ in kind: a line of strips, a
-plane of columns.)
+and hands it to its kernels, which then hold no test of the dimension of their own. (The sweep's
+strips and columns, own/strips.py and own/columns.py, differ in kind: a line of strips, a plane of
+columns.)
 """
 
 from __future__ import annotations

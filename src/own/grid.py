@@ -879,7 +879,7 @@ class SquareGrid(CellLayout):
                 **({"absent": len(self._slots[0]) - int(self._start[self._large_key() + 1])}
                    if self.alive is not None else {}),
                 **({"statics": len(self._statics.ids)} if self._statics is not None else {}),
-                "vector": int(self._vector),
+                "vector": int(self._vector_now),
                 **self._counters, **self._left_out}
 
     def validate(self):

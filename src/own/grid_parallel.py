@@ -13,23 +13,19 @@ objects are found afresh, serially, as in own.grid_incremental.
 
 Measured at the essay's density (python -m studies.bench, 2 cores): 0.87 against 1.26 ms a frame
 on one thread at n = 131072, 9.6 against 19.5 ms at 2^20; it loses below about 16384 objects.
-
-Over spheres it is own.grid's cubes (own/grid3d.py) with the pair search split into chunks of
-slots searched in parallel, each into its own rows; the counting sort stays on one thread."""
+One source for circles and spheres, as own.grid_incremental's."""
 
 from __future__ import annotations
 
 import numba as nb
 import numpy as np
 
-from .common import PairCollector, radius_of
-from .dimension import CIRCLES
-from .grid import NX, cell_key, grid_layout, key_space, small_limit
-from .grid3d import CubesForSpheres
-from .grid_incremental import (IncrementalSquares, add_neighbours, first_large_rank, head_length, incremental_rebuild,
-                               large_pairs)
-from .kept_lists import (LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT, boxes_overlap,
-                         drop_moved, move, unpack)
+from .common import PairCollector, centre_extents, radius_of
+from .grid import cell_key, grid_layout, key_space, small_limit
+from .grid_incremental import (IncrementalGrid, add_neighbours, first_large_rank, head_length, head_offset,
+                               incremental_rebuild, large_pairs)
+from .kept_lists import (CANDIDATE_RANK, LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT,
+                         boxes_overlap, drop_moved, move, unpack)
 from .parallel import chunk_count
 
 # Default `parallel_from`, in objects: below it the frame runs on one thread, as in
@@ -46,17 +42,18 @@ def _span(c, chunks, n):
 
 
 @nb.njit(cache=True)
-def _chunk_movers(positions, lo, hi, radius, limit, layout, rank, xy, okey, movers):
+def _chunk_movers(positions, lo, hi, radius, limit, layout, rank, xy, okey, movers, dim):
     """Objects lo..hi-1's centres stored by rank, and those that changed cell listed in `movers`
     from row lo; returns how many. Compiled apart and called per chunk: own.grid's key_space and
     cell_key, inlined into a function with a parallel loop, hand it tuples of the axes that
-    numba's parallel loops cannot take ("non scalar argument")."""
-    space = key_space(layout, CIRCLES)
+    numba's parallel loops cannot take ("non scalar argument"); so do the helpers below."""
+    space = key_space(layout, dim)
     k = lo
     for i in range(lo, hi):
         a = rank[i]
-        xy[a, 0], xy[a, 1] = positions[i, 0], positions[i, 1]
-        key = cell_key(positions, i, radius_of(radius, i), limit, space, CIRCLES)
+        for axis in range(len(dim)):
+            xy[a, axis] = positions[i, axis]
+        key = cell_key(positions, i, radius_of(radius, i), limit, space, dim)
         if key != okey[i]:
             movers[k, 0], movers[k, 1] = a, key
             k += 1
@@ -64,22 +61,29 @@ def _chunk_movers(positions, lo, hi, radius, limit, layout, rank, xy, okey, move
 
 
 @nb.njit(cache=True)
-def large_key_of(layout):
-    """Key of the large bucket over circles (own.grid's key_space)."""
-    return key_space(layout, CIRCLES)[4]
+def large_key_of(layout, dim):
+    """Key of the large bucket (own.grid's key_space)."""
+    return key_space(layout, dim)[4]
+
+
+@nb.njit(cache=True)
+def head_offset_of(layout, dim):
+    """What the lists' heads are indexed by past a key (grid_incremental.head_offset)."""
+    return head_offset(key_space(layout, dim)[3], dim)
 
 
 @nb.njit(cache=True, parallel=True)
-def chunked_update(positions, radius, limit, layout, state, head, cand, counts, movers, found, moved, max_movers):
+def chunked_update(positions, radius, limit, layout, state, head, cand, counts, movers, found, moved, max_movers,
+                   dim):
     """incremental_update with the candidates in chunks: returns (candidates, movers), or
     (-1, movers) when a rebuild is due (too many movers, one that starts or stops being large, or
     a chunk with no room for its new candidates)."""
     perm, rank, xy, sr, rkey, nxt, prv, okey = unpack(state)
     n, chunks, rows = perm.shape[0], counts.shape[0], cand.shape[1]
-    w, large = int(layout[NX]) + 2, large_key_of(layout)
+    top, large = head_offset_of(layout, dim), large_key_of(layout, dim)
     for c in nb.prange(chunks):  # centres stored by rank, and each chunk's movers from its first row
         lo, hi = _span(c, chunks, n)
-        found[c] = _chunk_movers(positions, lo, hi, radius, limit, layout, rank, xy, okey, movers)
+        found[c] = _chunk_movers(positions, lo, hi, radius, limit, layout, rank, xy, okey, movers, dim)
     total = 0
     for c in range(chunks):
         total += found[c]
@@ -92,12 +96,12 @@ def chunked_update(positions, radius, limit, layout, state, head, cand, counts, 
                 return -1, total
     for c in range(chunks):  # the movers change lists
         lo = _span(c, chunks, n)[0]
-        move(state, head, moved, movers, lo, lo + found[c], w)
+        move(state, head, moved, movers, lo, lo + found[c], top)
     full = 0
     for c in nb.prange(chunks):  # each chunk drops its candidates that moved, then adds its movers'
         m = drop_moved(cand[c], counts[c], moved)
         lo = _span(c, chunks, n)[0]
-        m = add_neighbours(state, head, moved, movers, lo, lo + found[c], w, cand[c], m)
+        m = add_neighbours(state, head, moved, movers, lo, lo + found[c], layout, cand[c], m, dim)
         if m > rows:
             full += 1
         counts[c] = min(m, rows)
@@ -127,50 +131,58 @@ def deal(flat, m, cand, counts):
     return True
 
 
+@nb.njit(cache=True)
+def _chunk_extent(positions, lo, hi, part, c, dim):
+    """Into rows 2c and 2c + 1 of part: the lowest and highest of centres lo..hi-1 on each axis
+    (some: hi > lo)."""
+    low, high = centre_extents(positions[lo:hi], dim)
+    for a in range(len(dim)):
+        part[2 * c, a], part[2 * c + 1, a] = low[a], high[a]
+
+
 @nb.njit(cache=True, parallel=True)
-def chunked_extents(positions, chunks):
-    """common.centre_extents over circles, each chunk of the centres on its own core."""
+def _chunk_extents(positions, chunks, dim):
+    """Each chunk's extent (_chunk_extent), (2 chunks, d), the chunks on every core."""
     n = positions.shape[0]
-    if n == 0:
-        return (0.0, 0.0), (0.0, 0.0)
-    part = np.empty((chunks, 4))
+    part = np.empty((2 * chunks, len(dim)))
     for c in nb.prange(chunks):
         lo, hi = _span(c, chunks, n)
-        x0 = y0 = np.inf
-        x1 = y1 = -np.inf
-        for i in range(lo, hi):
-            x, y = positions[i, 0], positions[i, 1]
-            x0, x1 = min(x0, x), max(x1, x)
-            y0, y1 = min(y0, y), max(y1, y)
-        part[c, 0], part[c, 1], part[c, 2], part[c, 3] = x0, y0, x1, y1
-    return (part[:, 0].min(), part[:, 1].min()), (part[:, 2].max(), part[:, 3].max())
+        _chunk_extent(positions, lo, hi, part, c, dim)
+    return part
+
+
+@nb.njit(cache=True)
+def chunked_extents(positions, chunks, dim):
+    """common.centre_extents, each chunk of the centres on its own core: the extent of the
+    chunks' lowest and highest centres."""
+    return centre_extents(_chunk_extents(positions, min(chunks, positions.shape[0]), dim), dim)
 
 
 @nb.njit(cache=True)
 def chunked_step(positions, radii, radius, p, cell, max_cells, layout, state, head, cand, counts, flat, m, movers,
-                 found, moved, max_movers):
+                 found, moved, max_movers, dim):
     """incremental_step with the candidates in chunks (`radius` as in incremental_update): returns
     (limit, candidates, objects that changed cell, rebuilt), the candidates -1 when the caller
     must grow head, flat or cand and rebuild (see incremental_step)."""
     n = positions.shape[0]
-    extent = chunked_extents(positions, counts.shape[0])
-    relayout = grid_layout(extent, n, p, cell, max_cells, layout, LAYOUT_SLACK_CELLS, CIRCLES)
-    limit = small_limit(extent, layout, CIRCLES)
+    extent = chunked_extents(positions, counts.shape[0], dim)
+    relayout = grid_layout(extent, n, p, cell, max_cells, layout, LAYOUT_SLACK_CELLS, dim)
+    limit = small_limit(extent, layout, dim)
     if not relayout and m >= 0:
         m, moved_now = chunked_update(positions, radius, limit, layout, state, head, cand, counts, movers, found, moved,
-                                      max_movers)
+                                      max_movers, dim)
         if m >= 0:
             return limit, m, moved_now, False
-    if head.shape[0] != head_length(layout):
+    if head.shape[0] != head_length(layout, dim):
         return limit, -1, n, True
-    m = incremental_rebuild(positions, radii, layout, limit, state, head, flat)
+    m = incremental_rebuild(positions, radii, layout, limit, state, head, flat, dim)
     if m > flat.shape[0] or not deal(flat, m, cand, counts):
         return limit, -1, n, True
     return limit, m, n, True
 
 
 @nb.njit(cache=True, parallel=True)
-def chunked_pairs(state, radius, cand, counts, hits, found, buf):
+def chunked_pairs(state, radius, cand, counts, hits, found, dim, buf):
     """The candidates' box-overlap pairs, as objects, into buf: each chunk tests its own
     candidates into its own rows of `hits` (as many as its candidates, so they always fit), then
     copies them to its offset in buf (if they all fit: PairCollector's protocol). `radius`: the
@@ -181,7 +193,7 @@ def chunked_pairs(state, radius, cand, counts, hits, found, buf):
         k = 0
         for t in range(counts[c]):  # branch-free, as in incremental_pairs
             a, b = cand[c, t, 0], cand[c, t, 1]
-            hit = boxes_overlap(xy, radius, a, b, CIRCLES)
+            hit = boxes_overlap(xy, radius, a, b, dim)
             hits[c, k, 0], hits[c, k, 1] = a, b
             k += hit
         for h in range(k):  # ranks to objects
@@ -200,25 +212,26 @@ def chunked_pairs(state, radius, cand, counts, hits, found, buf):
 
 
 @nb.njit(cache=True)
-def has_large(state, layout):
+def has_large(state, layout, dim):
     """Whether any object is large (they are the last ranks)."""
     rkey = state[0][2]
-    return first_large_rank(rkey, large_key_of(layout)) < rkey.shape[0]
+    return first_large_rank(rkey, large_key_of(layout, dim)) < rkey.shape[0]
 
 
 @nb.njit(cache=True)
-def large_only(state, head, layout, limit, tests, buf):
+def large_only(state, head, layout, limit, tests, dim, buf):
     """large_pairs from row 0 of buf, in PairCollector's calling order."""
-    return large_pairs(state, head, layout, limit, buf, 0, tests)
+    return large_pairs(state, head, layout, limit, buf, 0, tests, dim)
 
 
-class ParallelSquares(IncrementalSquares):
-    """own.grid_parallel over circles: own.grid_incremental with each frame split over every core
-    (see the module's docstring), from `parallel_from` objects on; below that, one thread exactly
-    as own.grid_incremental (its plain search too, where kept candidates do not pay)."""
+class ParallelIncrementalGrid(IncrementalGrid):
+    """own.grid_incremental with each frame split over every core (see the module's docstring),
+    from `parallel_from` objects on; below that, one thread exactly as own.grid_incremental (its
+    plain search too, where kept candidates do not pay). Its figures use every core: compare them
+    with that in mind."""
 
     name = "own.grid_parallel"
-    defaults = {**IncrementalSquares.defaults, "parallel_from": PARALLEL_FROM_OBJECTS}
+    defaults = {**IncrementalGrid.defaults, "parallel_from": PARALLEL_FROM_OBJECTS}
 
     def __init__(self, **params):
         super().__init__(**params)
@@ -233,7 +246,7 @@ class ParallelSquares(IncrementalSquares):
         if not self._chunked:
             super()._new_candidates(rows)
             return
-        self._flat = np.empty((rows, 2), dtype=np.int64)  # a rebuild's candidates, before they are dealt
+        self._flat = np.empty((rows, 2), dtype=CANDIDATE_RANK)  # a rebuild's candidates, before they are dealt
         self._chunk_rows(rows)
         self._counts, self._found = np.zeros(chunk_count(), dtype=np.int64), np.zeros(chunk_count(), dtype=np.int64)
 
@@ -241,7 +254,7 @@ class ParallelSquares(IncrementalSquares):
         """Candidate and hit rows for m candidates dealt to the chunks, with room for a quarter more."""
         chunks = chunk_count()
         rows = m // chunks + m // (4 * chunks) + 64
-        self._cand = np.empty((chunks, rows, 2), dtype=np.int64)
+        self._cand = np.empty((chunks, rows, 2), dtype=CANDIDATE_RANK)
         self._hits = np.empty((chunks, rows, 2), dtype=np.int64)
 
     def _may_search_plain(self) -> bool:
@@ -255,7 +268,8 @@ class ParallelSquares(IncrementalSquares):
         self._limit, self._m, moved, rebuilt = chunked_step(
             positions, self.radii, self._radius, self._p, self._cell, self._max_cells, self._layout, self._state,
             self._head, self._cand, self._counts, self._flat, -1 if renew else self._m, self._movers, self._found,
-            self._moved, self.n // REBUILD_MOVERS_DIVISOR)
+            self._moved, self.n // REBUILD_MOVERS_DIVISOR, self._dim)
+        self._positions = positions
         self._moves = 0 if rebuilt else self._moves + moved
         if self._m < 0:
             self._grow_and_deal(positions)
@@ -264,12 +278,12 @@ class ParallelSquares(IncrementalSquares):
 
     def _grow_and_deal(self, positions):
         """Rebuild into a head sized for the layout, and flat and chunked rows for every candidate."""
-        self._head = np.empty(head_length(self._layout), dtype=np.int64)
+        self._head = np.empty(head_length(self._layout, self._dim), dtype=np.int64)
         while True:
             m = incremental_rebuild(positions, self.radii, self._layout, self._limit, self._state, self._head,
-                                    self._flat)
+                                    self._flat, self._dim)
             if m > len(self._flat):
-                self._flat = np.empty((m + m // 4 + 64, 2), dtype=np.int64)
+                self._flat = np.empty((m + m // 4 + 64, 2), dtype=CANDIDATE_RANK)
                 continue
             if deal(self._flat, m, self._cand, self._counts):
                 break
@@ -280,10 +294,10 @@ class ParallelSquares(IncrementalSquares):
         if not self._chunked:
             return super()._pairs()
         out, (tests,) = self._collect(chunked_pairs, self._state, self._radius_by_rank, self._cand, self._counts,
-                                      self._hits, self._found)
-        if has_large(self._state, self._layout):
+                                      self._hits, self._found, self._dim)
+        if has_large(self._state, self._layout, self._dim):
             large, (tests,) = self._collect_large(large_only, self._state, self._head, self._layout, self._limit,
-                                                  tests)
+                                                  tests, self._dim)
             out = np.concatenate([out, large])
         self._counters[3] = tests
         return out
@@ -297,11 +311,3 @@ class ParallelSquares(IncrementalSquares):
             return super()._candidates()
         return np.concatenate([self._cand[c, :k] for c, k in enumerate(self._counts)])
 
-
-class ParallelIncrementalGrid(CubesForSpheres, ParallelSquares):
-    """own.grid_incremental with each frame split over every core, from `parallel_from` objects on
-    (below: one thread); over spheres, own.grid's cubes with the pair search split over every core
-    (own/grid3d.py). Its figures use every core: compare them with that in mind."""
-
-    def cube_chunks(self) -> int:
-        return chunk_count() if self.n >= self._parallel_from else 0

@@ -9,6 +9,8 @@ import numpy as np
 
 from interface.base import PairArray
 
+from .dimension import CIRCLES, SPHERES
+
 # Above this many objects brute force is too slow; the exact grid (own.grid, circles or spheres:
 # tested equal to brute force on random and adversarial scenes) takes over.
 BRUTE_FORCE_LIMIT = 3000
@@ -39,27 +41,35 @@ def circle_pairs(positions: np.ndarray, radii: np.ndarray) -> PairArray:
 
 @nb.njit(cache=True)
 def narrow_phase(positions: np.ndarray, radii: np.ndarray, pairs: np.ndarray) -> PairArray:
-    """The exact narrow phase shared by every backend: the candidate pairs whose circles truly
-    overlap, distance <= r_i + r_j (touching counts). The rows are gathered in the same pass as
-    the test: numpy's boolean indexing of them cost twice the test itself at n = 2048. Spheres
-    (positions (n, 3)) in a loop of their own, so that the circles' loop stays as it was."""
+    """The exact narrow phase shared by every backend: the candidate pairs whose circles (or
+    spheres, positions (n, 3)) truly overlap, distance <= r_i + r_j (touching counts)."""
+    if positions.shape[1] == 3:  # the one choice of a dimension: _touching compiled for each marker
+        return _touching(positions, radii, pairs, SPHERES)
+    return _touching(positions, radii, pairs, CIRCLES)
+
+
+@nb.njit(cache=True)
+def _touching(positions, radii, pairs, dim):
+    """narrow_phase over `dim`'s axes. The rows are gathered in the same pass as the test: numpy's
+    boolean indexing of them cost twice the test itself at n = 2048."""
     out = np.empty((pairs.shape[0], 2), dtype=pairs.dtype)
     count = 0
-    if positions.shape[1] == 3:
-        for k in range(pairs.shape[0]):
-            i, j = pairs[k, 0], pairs[k, 1]
-            dx = positions[j, 0] - positions[i, 0]
-            dy = positions[j, 1] - positions[i, 1]
-            dz = positions[j, 2] - positions[i, 2]
-            reach = radii[i] + radii[j]
-            out[count, 0], out[count, 1] = i, j
-            count += dx * dx + dy * dy + dz * dz <= reach * reach
-        return out[:count]
     for k in range(pairs.shape[0]):
         i, j = pairs[k, 0], pairs[k, 1]
-        dx = positions[j, 0] - positions[i, 0]
-        dy = positions[j, 1] - positions[i, 1]
         reach = radii[i] + radii[j]
-        out[count, 0], out[count, 1] = i, j  # kept only if the circles overlap (branch-free)
-        count += dx * dx + dy * dy <= reach * reach
+        # Loaded before the store, which the compiler cannot move them past.
+        hit = squared_distance(positions, i, j, dim) <= reach * reach
+        out[count, 0], out[count, 1] = i, j  # kept only if they overlap (branch-free)
+        count += hit
     return out[:count]
+
+
+@nb.njit(cache=True, inline="always")
+def squared_distance(positions, i, j, dim):
+    """The squared distance between rows i and j of `positions`."""
+    delta = positions[j, 0] - positions[i, 0]
+    distance = delta * delta
+    for a in range(1, len(dim)):
+        delta = positions[j, a] - positions[i, a]
+        distance += delta * delta
+    return distance

@@ -19,15 +19,12 @@ class StaticsApart:
     """Mixin, first in the bases of a backend of ours whose lifecycle is "rebuild"."""
 
     _static_cells: StaticCells | None = None
-
-    @property
-    def statics_held_apart(self) -> bool:
-        """Whether BroadPhase.pairs has no pairs of two statics to drop: the statics' grid is 2D,
-        so spheres take the generic way, statics inside."""
-        return self.dim == 2
+    # BroadPhase.pairs has no pairs of two statics to drop: they are never in the structure. (The
+    # statics' grid is own.grid's, in either dimension.)
+    statics_held_apart = True
 
     def _rebuild(self, positions: np.ndarray) -> None:
-        if self.static is None or not self.statics_held_apart:
+        if self.static is None:
             self._static_cells = None
             super()._rebuild(positions)
             return
