@@ -24,8 +24,8 @@ RENEW_AFTER_MOVES_PER_OBJECT = 1
 # past the scene's extent, as every one at the edge does in turn, would cause one.
 LAYOUT_SLACK_CELLS = 4.0
 # Candidates are pairs of ranks (below n), held as int32: half the memory of int64 for the update to
-# drop from and the pair test to read (frames 0.92x on a settled pile at 8 candidates an object,
-# 0.77x on the essay's scene at n = 131072; elsewhere the same).
+# drop from and the pair test to read (kept candidates' frames 0.83 to 0.93x on a settled pile at 8
+# candidates an object; 0.77 to 0.93x on the essay's scene at n = 131072; elsewhere within noise).
 CANDIDATE_RANK = np.int32
 
 
