@@ -20,10 +20,9 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .common import PairCollector, centre_extents, radius_of
+from .common import centre_extents, radius_of
 from .grid import cell_key, grid_layout, key_space, small_limit
-from .grid_incremental import (IncrementalGrid, add_neighbours, first_large_rank, head_length, head_offset,
-                               incremental_rebuild, large_pairs)
+from .grid_incremental import IncrementalGrid, add_neighbours, has_large, head_length, head_offset, incremental_rebuild
 from .kept_lists import (CANDIDATE_RANK, LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT,
                          boxes_overlap, drop_moved, move, unpack)
 from .parallel import chunk_count
@@ -211,19 +210,6 @@ def chunked_pairs(state, radius, cand, counts, hits, found, dim, buf):
     return offsets[chunks], tests
 
 
-@nb.njit(cache=True)
-def has_large(state, layout, dim):
-    """Whether any object is large (they are the last ranks)."""
-    rkey = state[0][2]
-    return first_large_rank(rkey, large_key_of(layout, dim)) < rkey.shape[0]
-
-
-@nb.njit(cache=True)
-def large_only(state, head, layout, limit, tests, dim, buf):
-    """large_pairs from row 0 of buf, in PairCollector's calling order."""
-    return large_pairs(state, head, layout, limit, buf, 0, tests, dim)
-
-
 class ParallelIncrementalGrid(IncrementalGrid):
     """own.grid_incremental with each frame split over every core (see the module's docstring),
     from `parallel_from` objects on; below that, one thread exactly as own.grid_incremental (its
@@ -236,7 +222,6 @@ class ParallelIncrementalGrid(IncrementalGrid):
     def __init__(self, **params):
         super().__init__(**params)
         self._parallel_from = self._int_param("parallel_from", 0)
-        self._collect_large = PairCollector()
 
     def _reset(self, positions, radii):
         self._chunked = self.n >= self._parallel_from
@@ -274,6 +259,8 @@ class ParallelIncrementalGrid(IncrementalGrid):
         if self._m < 0:
             self._grow_and_deal(positions)
             rebuilt = True
+        if rebuilt:
+            self._large = has_large(self._state, self._layout, self._dim)
         self._counters = [moved, int(rebuilt), self._m, None]
 
     def _grow_and_deal(self, positions):
@@ -295,10 +282,7 @@ class ParallelIncrementalGrid(IncrementalGrid):
             return super()._pairs()
         out, (tests,) = self._collect(chunked_pairs, self._state, self._radius_by_rank, self._cand, self._counts,
                                       self._hits, self._found, self._dim)
-        if has_large(self._state, self._layout, self._dim):
-            large, (tests,) = self._collect_large(large_only, self._state, self._head, self._layout, self._limit,
-                                                  tests, self._dim)
-            out = np.concatenate([out, large])
+        out, tests = self._large_pairs(out, tests)
         self._counters[3] = tests
         return out
 
