@@ -76,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     recorded = scene.motion.frames if isinstance(scene.motion, Recording) else None
     if recorded is not None:  # measured on the frames it has (frame 0 is the warm-up), or on as many as asked
         args.frames = recorded - 1 if args.frames is None else min(args.frames, recorded - 1)
-    chosen = in_dimension(matched_backends(args.backends), scene.dim)
+    chosen = in_dimension(matched_backends(args.backends), scene.dim, scene.shape)
     with Output(args.out, "compare", command_line("compare", argv), args.resume) as out:
         unavailable = warn_unavailable(chosen)
         runnable = [n for n in chosen if n not in unavailable]
@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
         if recorded is not None:
             timed += (" (all of the recording's after its first, the warm-up)" if args.frames == recorded - 1
                       else f" (of the recording's {recorded - 1} after its first: --frames)")
-        print(f"scene {scene.name}: n={scene.n}, radii {scene.radius_range[0]:g}..{scene.radius_range[1]:g}, "
+        print(f"scene {scene.name}: n={scene.n}, {scene.sizes_in_words}, "
               f"box {scene.box} ({covering(traj)}), {timed} x {args.repeat} repeats (trajectory and exact pairs "
               f"computed once in {time.perf_counter() - start:.1f} s)")
         if scene.motion is not None:

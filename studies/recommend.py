@@ -369,7 +369,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.report_only:
         return report_only(Path(args.out))
     scene = scene_from_args(args)
-    chosen = in_dimension(matched_backends(args.backends), scene.dim)
+    chosen = in_dimension(matched_backends(args.backends), scene.dim, scene.shape)
     with Output(args.out, "recommend", command_line("recommend", argv), args.resume) as out:
         missing = warn_unavailable(chosen)
         backends = run_order([b for b in chosen if b not in missing])

@@ -93,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parse(argv)
     params = parse_params(args.params)
     scene = scene_from_args(args)
-    names = in_dimension(matched_backends(args.backends), scene.dim)
+    names = in_dimension(matched_backends(args.backends), scene.dim, scene.shape)
     backends = []
     try:
         for name in names:

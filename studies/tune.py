@@ -386,7 +386,7 @@ class Plan:
         if args.families:
             return cls()
         base = scene_from_args(args)
-        chosen = in_dimension(matched_backends(args.backends), base.dim)
+        chosen = in_dimension(matched_backends(args.backends), base.dim, base.shape)
         missing = warn_unavailable(chosen) if args.backends != "*" else {}  # "*": every one here with knobs
         backends = tunable([b for b in chosen if b not in missing], base.dim)
         if not backends:
@@ -405,7 +405,7 @@ def study(args, plan: Plan, runner: Runner, out: Path) -> int:
         return 0
     best = []
     for scene in plan.scenes:
-        print(f"scene {scene.name}: n={scene.n}, radii {scene.radius_range[0]:g}..{scene.radius_range[1]:g}, "
+        print(f"scene {scene.name}: n={scene.n}, {scene.sizes_in_words}, "
               f"{args.frames} frames x {args.repeat} repeats per point")
         results = run_tune(runner, scene, plan.backends, args)
         best += best_rows(results, scene.n)

@@ -128,3 +128,30 @@ def sphere_scenes(draw, max_n: int = 150):
         radii = np.exp(rng.uniform(np.log(0.5), np.log(60.0), n)) if sizes == "mixed" else np.full(n, sizes)
     shift = draw(st.sampled_from([0.0, -1000.0, 1e6, 1e300]))
     return positions + shift, radii
+
+
+@st.composite
+def box_scenes(draw, dim: int = 2, max_n: int = 150):
+    """Axis-aligned boxes (positions, half-extents (n, d)) that try to break a broad phase: boxes
+    of mixed aspect, long walls across the world, boxes of zero width on an axis, aspect up to
+    1:1e6, and boxes on a lattice whose edges are shared exactly (closed intervals touch)."""
+    n = draw(st.integers(0, max_n))
+    rng = np.random.default_rng(draw(st.integers(0, 2**31 - 1)))
+    kind = draw(st.sampled_from(["mixed", "walls", "zero_width", "aspect", "shared_edges"]))
+    positions = rng.uniform(0, 1000, (n, dim))
+    extents = rng.uniform(2, 8, (n, dim)) * rng.uniform(1, 4, (n, 1)) ** (np.arange(dim) == 0)
+    if kind == "walls":  # a few boxes as long as the world along one axis, thin along the others
+        walls = rng.random(n) < 0.1
+        axis = rng.integers(0, dim, n)
+        extents[walls] = 5.0
+        extents[walls, axis[walls]] = rng.uniform(200, 1500, walls.sum())
+    elif kind == "zero_width":
+        extents[rng.random((n, dim)) < 0.3] = 0.0
+    elif kind == "aspect":
+        extents[:, 0] = rng.uniform(1e-4, 1e-3, n)
+        extents[:, 1] = extents[:, 0] * 1e6
+    elif kind == "shared_edges":  # unit boxes on a lattice of unit steps: every neighbour touches
+        positions = rng.integers(0, 12, (n, dim)).astype(np.float64)
+        extents = np.full((n, dim), 0.5)
+    shift = draw(st.sampled_from([0.0, -1e4, 1e6]))
+    return positions + shift, extents

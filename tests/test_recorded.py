@@ -114,7 +114,7 @@ def test_a_bad_npz_is_one_line_naming_the_problem(tmp_path, arrays, words):
 def test_a_file_that_is_not_a_trajectory_is_refused(tmp_path):
     (tmp_path / "notes.txt").write_text("hello")
     (tmp_path / "broken.npz").write_bytes(b"not a zip")
-    for name, words in (("notes.txt", "an .npz or a .csv"), ("broken.npz", "not a readable .npz"),
+    for name, words in (("notes.txt", "an .npz, a .csv or a Broadmark .aabbs"), ("broken.npz", "not a readable .npz"),
                         ("missing.npz", "no such file")):
         with pytest.raises(TrajectoryFileError, match=re.escape(words)):
             load_trajectory(tmp_path / name)

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Literal
 import numpy as np
 import numpy.typing as npt
 
-from .checks import check_mask, check_positions, check_radii, first_moved, shown
+from .checks import check_extents, check_mask, check_positions, check_radii, first_moved, shown
 
 if TYPE_CHECKING:
     from .knobs import Knob
@@ -39,6 +39,9 @@ NO_ALIVE = np.empty(0, dtype=bool)  # first_moved's "every object alive"
 # "contacts": the engine ran its own narrow phase first, so only a superset of the truly
 # overlapping circles can be promised (box-only overlaps never reach Python).
 Reports = Literal["boxes", "contacts"]
+# What a backend's objects are: "balls", circles and spheres given by radii (n,); "boxes", axis-aligned
+# boxes given by half-extents (n, d). Every backend takes balls; `shapes` says whether it takes boxes.
+Shape = Literal["balls", "boxes"]
 # "native": statics and spawning through the backend's own means; "rebuild": see the module docstring.
 Lifecycle = Literal["native", "rebuild"]
 
@@ -72,18 +75,22 @@ class Limits:
             if reach > self.coordinate:
                 return f"coordinates up to {beside(reach, self.coordinate)}, beyond its limit of {self.coordinate:.3g}"
         if radii is not None and len(radii):
-            if not self.zero_radius and radii.min() == 0.0:
-                return f"radius 0 (object {int(radii.argmin())}), which it cannot create"
+            # A box's limits are its narrowest and widest half-extents, a ball's its radius.
+            word = "radius" if radii.ndim == 1 else "half-extent"
+            smallest = radii if radii.ndim == 1 else radii.min(axis=1)
+            largest = radii if radii.ndim == 1 else radii.max(axis=1)
+            if not self.zero_radius and smallest.min() == 0.0:
+                return f"{word} 0 (object {int(smallest.argmin())}), which it cannot create"
             problem = self._flat_problem(positions, radii)
             if problem:
                 return problem
-            positive = np.where(radii > 0, radii, np.inf)
+            positive = np.where(smallest > 0, smallest, np.inf)
             if self.min_radius > 0 and positive.min() < self.min_radius:
-                return (f"radius {beside(positive.min(), self.min_radius)} (object {int(positive.argmin())}), under "
+                return (f"{word} {beside(positive.min(), self.min_radius)} (object {int(positive.argmin())}), under "
                         f"its limit of {self.min_radius:.3g}")
-            if radii.max() > self.radius:
-                return (f"radius {beside(radii.max(), self.radius)} (object {int(radii.argmax())}), over its limit of "
-                        f"{self.radius:.3g}")
+            if largest.max() > self.radius:
+                return (f"{word} {beside(largest.max(), self.radius)} (object {int(largest.argmax())}), over its "
+                        f"limit of {self.radius:.3g}")
             return self._reach_problem(positions, radii)
         return None
 
@@ -107,22 +114,24 @@ class Limits:
     def _flat_problem(self, positions: np.ndarray, radii: np.ndarray) -> str | None:
         if self.zero_radius:
             return None
-        flat = ((positions + radii[:, None]) == (positions - radii[:, None])).any(axis=1)
+        halves = per_axis(radii)
+        flat = ((positions + halves) == (positions - halves)).any(axis=1)
         if not flat.any():
             return None
         k = int(np.flatnonzero(flat)[0])
-        return (f"radius {radii[k]:.3g} (object {k}), too small to widen its box at coordinates "
+        size = f"radius {radii[k]:.3g}" if radii.ndim == 1 else f"half-extents {radii[k].tolist()}"
+        return (f"{size} (object {k}), too small to widen its box at coordinates "
                 f"{positions[k].tolist()}: a box of zero width, which it cannot create")
 
     def _reach_problem(self, positions: np.ndarray, radii: np.ndarray) -> str | None:
         if self.reach == math.inf:
             return None
         with np.errstate(over="ignore"):
-            far = np.abs(positions).max(axis=1) + radii
+            far = (np.abs(positions) + per_axis(radii)).max(axis=1)
         if far.max() <= self.reach:
             return None
         k = int(far.argmax())
-        return (f"object {k} reaches {beside(far[k], self.reach)} from the origin (coordinate plus radius), beyond "
+        return (f"object {k} reaches {beside(far[k], self.reach)} from the origin (coordinate plus half its size), beyond "
                 f"its limit of {self.reach:.3g}")
 
     def crowd_problem(self, positions: np.ndarray) -> str | None:
@@ -135,6 +144,18 @@ class Limits:
         k = int(counts.argmax())
         return (f"{counts[k]} objects at one point {centres[k].tolist()}, over its limit of {self.coincident} "
                 f"(their {counts[k] * (counts[k] - 1) // 2} pairs are all contacts)")
+
+
+def per_axis(radii: np.ndarray) -> np.ndarray:
+    """Each object's half-size on each axis, for numpy's broadcasting against positions (n, d):
+    a ball's radius (n, 1), a box's half-extents as they are (n, d)."""
+    return radii[:, None] if radii.ndim == 1 else radii
+
+
+def size_keyword(sizes: np.ndarray) -> dict[str, np.ndarray]:
+    """Objects' sizes as reset's keyword: {"radii": ...} for balls (n,), {"extents": ...} for
+    boxes (n, d)."""
+    return {"radii": sizes} if sizes.ndim == 1 else {"extents": sizes}
 
 
 def beside(value: float, limit: float) -> str:
@@ -211,6 +232,9 @@ class BroadPhase(ABC):
     # The dimensions it works in: positions (n, 2), circles in a plane, and (n, 3), spheres, where
     # it has 3 here. It works in the dimension of the positions it was reset with.
     dims: ClassVar[tuple[int, ...]] = (2,)
+    # The shapes it takes (see Shape): every backend takes balls; those whose structure holds
+    # boxes of any extents exactly also take "boxes". A backend without them refuses boxes in one line.
+    shapes: ClassVar[tuple[Shape, ...]] = ("balls",)
 
     def __init__(self, **params: Any) -> None:
         unknown = sorted(set(params) - set(self.defaults))
@@ -224,20 +248,22 @@ class BroadPhase(ABC):
         self._stats: dict[str, float] = {}
         self.objects = 0  # every object id, alive or not
         self.dim = 2  # of the positions it was reset with
+        self.shape: Shape = "balls"  # of the objects it was reset with; for boxes `radii` holds half-extents (n, d)
         self.static: np.ndarray | None = None
         self.alive: np.ndarray | None = None
         self.spawned = self.removed = NO_IDS  # this frame's, for "native" backends
         self._alive_ids: np.ndarray | None = None  # "rebuild": the ids of the objects handed to the backend
         self._static_home: tuple[np.ndarray, np.ndarray] | None = None  # static ids and where they were at reset
 
-    def reset(self, positions: npt.ArrayLike, radii: npt.ArrayLike, static: npt.ArrayLike | None = None,
-              alive: npt.ArrayLike | None = None) -> None:
-        """Build from scratch for these objects (positions (n, 2), or (n, 3) where `dims` has 3;
-        radii (n,)); `static` (n,) bool marks objects that never move, `alive` (n,) bool the objects
-        that exist now (default all)."""
+    def reset(self, positions: npt.ArrayLike, radii: npt.ArrayLike | None = None, static: npt.ArrayLike | None = None,
+              alive: npt.ArrayLike | None = None, *, extents: npt.ArrayLike | None = None) -> None:
+        """Build from scratch for these objects (positions (n, 2), or (n, 3) where `dims` has 3):
+        circles or spheres of `radii` (n,), or axis-aligned boxes of half-extents `extents` (n, d)
+        where `shapes` has "boxes"; `static` (n,) bool marks objects that never move, `alive` (n,)
+        bool the objects that exist now (default all)."""
         pos = self._positions_to_reset(positions)
         n = pos.shape[0]
-        radii = check_radii(radii, n)
+        radii = self._sizes_to_reset(radii, extents, n)
         self.static, self.alive = check_mask(static, (n,), "static"), check_mask(alive, (n,), "alive")
         self._check_limits(pos, radii, reset=True)
         self.objects, self.spawned, self.removed, self._all_radii = n, NO_IDS, NO_IDS, radii
@@ -252,13 +278,16 @@ class BroadPhase(ABC):
             self._rebuild(pos)
         self._built = True
 
-    def update(self, positions: npt.ArrayLike, alive: npt.ArrayLike | None = None) -> None:
-        """The same objects (same radii, same ids) moved to `positions`; `alive` (n,) bool says
-        which exist now, where objects appear or disappear (None: the same as before)."""
+    def update(self, positions: npt.ArrayLike, alive: npt.ArrayLike | None = None, *,
+               extents: npt.ArrayLike | None = None) -> None:
+        """The same objects (same sizes, same ids) moved to `positions`; `alive` (n,) bool says
+        which exist now, where objects appear or disappear (None: the same as before). Boxes may
+        change their `extents` (n, d) as bodies rotate (None: the same as before)."""
         if not self._built:
             raise RuntimeError(f"{self.name}: call reset(positions, radii) before update()")
         pos = check_positions(positions, self.objects, dims=(self.dim,))
-        self._check_limits(pos, self._all_radii, moved=True)
+        reshaped = extents is not None and self._reshaped(extents)
+        self._check_limits(pos, self._all_radii, moved=not reshaped, reset=reshaped)
         changed = False
         if alive is not None:
             alive = check_mask(alive, (self.objects,), "alive")
@@ -270,7 +299,9 @@ class BroadPhase(ABC):
             if changed:
                 self.spawned, self.removed = np.flatnonzero(alive & ~before), np.flatnonzero(before & ~alive)
             self.alive = alive
-        if self._alive_ids is None and (self._native_lifecycle() or not changed):
+        if reshaped:
+            self._reshape(pos)
+        elif self._alive_ids is None and (self._native_lifecycle() or not changed):
             self._update(pos)
         elif changed:
             self._rebuild(pos)
@@ -279,6 +310,46 @@ class BroadPhase(ABC):
             self._update(self._held_positions)
         if changed:
             self.spawned = self.removed = NO_IDS
+
+    def _sizes_to_reset(self, radii: object, extents: object, n: int) -> np.ndarray:
+        """The objects' sizes checked: radii (n,) for balls, half-extents (n, d) for boxes, where
+        this backend takes boxes (a one-line error otherwise); sets `shape`."""
+        if (radii is None) == (extents is None):
+            raise ValueError(f"{self.name}: give radii (circles, spheres) or extents (boxes), "
+                             + ("not both" if radii is not None else "one of them"))
+        if radii is not None:
+            self.shape = "balls"
+            return check_radii(radii, n)
+        if "boxes" not in self.shapes:
+            raise ValueError(f"{self.name} takes circles and spheres only (radii): it does not take boxes (extents)")
+        self.shape = "boxes"
+        return check_extents(extents, n, self.dim)
+
+    def _reshaped(self, extents: object) -> bool:
+        """Take this frame's half-extents of boxes; whether they differ from the last ones."""
+        if self.shape != "boxes":
+            raise ValueError(f"{self.name}: extents given to update, but it was reset with radii (circles, spheres)")
+        sizes = check_extents(extents, self.objects, self.dim)
+        if np.array_equal(sizes, self._all_radii):
+            return False
+        if self._static_home is not None:
+            ids = self._static_home[0]
+            differs = (sizes[ids] != self._all_radii[ids]).any(axis=1)
+            if differs.any():
+                k = int(ids[np.flatnonzero(differs)[0]])
+                raise ValueError(f"{self.name}: object {k} is static but its extents changed, from "
+                                 f"{self._all_radii[k].tolist()} to {sizes[k].tolist()}: statics never change")
+        self._all_radii = sizes
+        return True
+
+    def _reshape(self, positions: np.ndarray) -> None:
+        """Boxes changed their extents (bodies rotated): built anew for them, as at a reset (a
+        backend that can refit its structure in place overrides this)."""
+        if self._alive_ids is None and (self._native_lifecycle() or (self.static is None and self.alive is None)):
+            self.radii = self._all_radii
+            self._reset(positions, self.radii)
+        else:
+            self._rebuild(positions)
 
     def _check_statics(self, positions: np.ndarray, alive: np.ndarray | None) -> None:
         """A static object alive now must be where it was at reset: every backend builds its

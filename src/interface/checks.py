@@ -113,6 +113,21 @@ def check_radii(radii: object, n: int) -> FloatArray:
     return np.ascontiguousarray(arr)
 
 
+def check_extents(extents: object, n: int, dim: int) -> FloatArray:
+    """Return a boxes' half-extents as a contiguous (n, dim) float64 array of finite non-negative
+    values (a box of zero width on an axis is allowed, as a radius of 0 is), or raise ValueError."""
+    arr = real_array(extents, "extents")
+    if arr.ndim != 2 or arr.shape != (n, dim):
+        raise ValueError(f"extents must have shape ({n}, {dim}), a half-extent per axis of each box to match the "
+                         f"positions, got {arr.shape}")
+    bad = ~np.isfinite(arr) | (arr < 0)
+    if bad.any():
+        i = int(np.flatnonzero(bad.any(axis=1))[0])
+        problem = "negative" if (arr[i] < 0).any() else "not finite"
+        raise ValueError(f"extents row {i} is {problem}: {arr[i].tolist()} (half-extents are finite and >= 0)")
+    return np.ascontiguousarray(arr)
+
+
 def check_mask(mask: object, shape: tuple[int, ...], what: str) -> np.ndarray | None:
     """`mask` as a contiguous bool array of `shape` (None stays None), or a ValueError naming the problem."""
     if mask is None:

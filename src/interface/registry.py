@@ -247,11 +247,12 @@ def unavailable() -> dict[str, str]:
     return {n: f"{r}; install it with: {family(n).install}" for n in BACKENDS if isinstance(r := _load(n), str)}
 
 
-def works_in(name: str, dim: int) -> bool:
-    """Whether the backend takes positions (n, dim) (its class's `dims`). One that cannot be
-    imported here counts as taking them, so that it is reported unavailable rather than hidden."""
+def works_in(name: str, dim: int, shape: str = "balls") -> bool:
+    """Whether the backend takes positions (n, dim) (its class's `dims`) of objects of this
+    `shape` ("balls" or "boxes": its `shapes`). One that cannot be imported here counts as taking
+    them, so that it is reported unavailable rather than hidden."""
     loaded = _load(name)
-    return isinstance(loaded, str) or dim in loaded.dims
+    return isinstance(loaded, str) or (dim in loaded.dims and shape in loaded.shapes)
 
 
 def create(name: str, **params: Any) -> BroadPhase:

@@ -38,6 +38,7 @@ class Brute(StaticsApart, BroadPhase):
     name = "own.brute"
     method = "brute"
     dims = (2, 3)
+    shapes = ("balls", "boxes")
 
     def _reset(self, positions, radii):
         self._pos = positions

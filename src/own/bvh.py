@@ -114,6 +114,7 @@ class LinearBvh(StaticsApart, SmallScenes, MortonTree):
     name = "own.bvh"
     method = "tree"
     dims = (2, 3)
+    shapes = ("balls", "boxes")
     defaults = {"leaf_size": 16, "coherent": True}
     sweeps = (Knob("leaf_size", fixed([1, 2, 4, 8, 16, 32]), "objects per leaf"),)
     build = staticmethod(bvh_build)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .common import insertion_sort
+from .common import half_of, insertion_sort
 from .radix import radix_sort
 
 # A repair gives up past this many swaps per object and radix-sorts: an object that jumps far in
@@ -37,11 +37,12 @@ def box_frame(centres, radii, frame, dim):
     x0 = y0 = z0 = np.inf
     x1 = y1 = z1 = -np.inf
     for i in range(centres.shape[0]):
-        r = radii[i]
-        x0, x1 = min(x0, centres[i, 0] - r), max(x1, centres[i, 0] + r)
-        y0, y1 = min(y0, centres[i, 1] - r), max(y1, centres[i, 1] + r)
+        rx, ry = half_of(radii, i, 0), half_of(radii, i, 1)
+        x0, x1 = min(x0, centres[i, 0] - rx), max(x1, centres[i, 0] + rx)
+        y0, y1 = min(y0, centres[i, 1] - ry), max(y1, centres[i, 1] + ry)
         if d == 3:  # known when compiled: no test in the loop over circles
-            z0, z1 = min(z0, centres[i, 2] - r), max(z1, centres[i, 2] + r)
+            rz = half_of(radii, i, d - 1)
+            z0, z1 = min(z0, centres[i, 2] - rz), max(z1, centres[i, 2] + rz)
     size = max(x1 - x0, y1 - y0)
     frame[0], frame[1] = x0, y0
     if d == 3:

@@ -17,14 +17,56 @@ from numba.extending import overload
 
 @nb.njit(cache=True)
 def boxes(positions: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Lower and upper corners (n, d) of the circles' (or spheres') axis-aligned boxes."""
+    """Lower and upper corners (n, d) of the objects' axis-aligned boxes: the circles' or spheres'
+    (radii (n,)), or the boxes' themselves (half-extents (n, d))."""
     lo = np.empty_like(positions)
     hi = np.empty_like(positions)
     for i in range(positions.shape[0]):
         for a in range(positions.shape[1]):
-            lo[i, a] = positions[i, a] - radii[i]
-            hi[i, a] = positions[i, a] + radii[i]
+            lo[i, a] = positions[i, a] - half_of(radii, i, a)
+            hi[i, a] = positions[i, a] + half_of(radii, i, a)
     return lo, hi
+
+
+def half_of(sizes, i, axis):
+    """Object i's half-size along `axis`: a ball's radius sizes[i] on every axis, a box's
+    half-extent sizes[i, axis], or `sizes` itself where it is one float (see radius_of). The
+    shape is data: a kernel written over half_of is compiled apart for balls and for boxes by the
+    type of the array it is handed (a vector or a matrix), as the dimension is by its marker.
+    A tuple of half-extents (halves) is indexed by `axis`."""
+    return sizes if np.ndim(sizes) == 0 else sizes[i] if np.ndim(sizes) == 1 else sizes[i, axis]
+
+
+@overload(half_of, inline="always")
+def _half_of(sizes, i, axis):
+    if isinstance(sizes, types.BaseTuple):
+        return lambda sizes, i, axis: sizes[axis]
+    if isinstance(sizes, types.Float):
+        return lambda sizes, i, axis: sizes
+    if sizes.ndim == 1:
+        return lambda sizes, i, axis: sizes[i]
+    return lambda sizes, i, axis: sizes[i, axis]
+
+
+def widest_half(sizes, i, dim):
+    """Object i's largest half-size over the axes: a ball's radius, a box's longest half-extent
+    (what decides whether an object fits a cell)."""
+    return sizes if np.ndim(sizes) == 0 else sizes[i] if np.ndim(sizes) == 1 else sizes[i].max()
+
+
+@overload(widest_half, inline="always")
+def _widest_half(sizes, i, dim):
+    if isinstance(sizes, types.Float):
+        return lambda sizes, i, dim: sizes
+    if sizes.ndim == 1:
+        return lambda sizes, i, dim: sizes[i]
+
+    def box(sizes, i, dim):
+        widest = sizes[i, 0]
+        for axis in range(1, len(dim)):
+            widest = max(widest, sizes[i, axis])
+        return widest
+    return box
 
 
 def swept_circles(before: np.ndarray, after: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -51,6 +93,61 @@ def _radius_of(radius, i):
     if isinstance(radius, types.Float):
         return lambda radius, i: radius
     return lambda radius, i: radius[i]
+
+
+def halves(sizes, i, dim):
+    """Object i's half-size on each axis as a tuple of d scalars held in registers: a ball's
+    radius d times, a box's half-extents (see half_of)."""
+
+
+@overload(halves, inline="always")
+def _halves(sizes, i, dim):
+    if sizes.ndim == 2:
+        if dim.count == 2:
+            return lambda sizes, i, dim: (sizes[i, 0], sizes[i, 1])
+        return lambda sizes, i, dim: (sizes[i, 0], sizes[i, 1], sizes[i, 2])
+    if dim.count == 2:
+        return lambda sizes, i, dim: (sizes[i], sizes[i])
+    return lambda sizes, i, dim: (sizes[i], sizes[i], sizes[i])
+
+
+def set_halves(sizes, i, h, dim):
+    """Write `h` (halves' tuple) back as object i's size: the radius, or the half-extents."""
+
+
+@overload(set_halves, inline="always")
+def _set_halves(sizes, i, h, dim):
+    if sizes.ndim == 2:
+        def box(sizes, i, h, dim):
+            for a in range(len(dim)):
+                sizes[i, a] = h[a]
+        return box
+
+    def ball(sizes, i, h, dim):
+        sizes[i] = h[0]
+    return ball
+
+
+def copy_size(dst, s, src, k, dim):
+    """dst's row s takes src's row k: a radius, or a box's half-extents."""
+
+
+@overload(copy_size, inline="always")
+def _copy_size(dst, s, src, k, dim):
+    if dst.ndim == 2:
+        def box(dst, s, src, k, dim):
+            for a in range(len(dim)):
+                dst[s, a] = src[k, a]
+        return box
+
+    def ball(dst, s, src, k, dim):
+        dst[s] = src[k]
+    return ball
+
+
+def widest_halves(sizes: np.ndarray) -> np.ndarray:
+    """Each object's largest half-size (n,): a ball's radius, a box's longest half-extent."""
+    return sizes if sizes.ndim == 1 else sizes.max(axis=1)
 
 
 # The parts of a frame our backends leave out where the scene does not need them, by the
@@ -151,13 +248,14 @@ def insertion_sort(order: np.ndarray, keys: np.ndarray, swaps_per_object: int) -
 
 @nb.njit(cache=True)
 def gather(positions, radii, order, centres, sr, dim):
-    """Centres and radii in `order`: the scattered reads, in a loop so short that the CPU keeps
-    many cache misses in flight (3x faster at n = 2^20 than a loop that also computes bounds)."""
+    """Centres and sizes (radii, or boxes' half-extents) in `order`: the scattered reads, in a loop
+    so short that the CPU keeps many cache misses in flight (3x faster at n = 2^20 than a loop that
+    also computes bounds)."""
     for a in range(order.shape[0]):
         i = order[a]
         for axis in range(len(dim)):
             centres[a, axis] = positions[i, axis]
-        sr[a] = radii[i]
+        copy_size(sr, a, radii, i, dim)
 
 
 class PairCollector:

@@ -27,16 +27,19 @@ import math
 
 import numba as nb
 import numpy as np
+from numba import types
 from numba.extending import overload
 
-from interface.base import BroadPhase
+from interface.base import BroadPhase, per_axis, size_keyword
 from interface.checks import shown
 from interface.knobs import Knob, mean_diameter, sizes
 
-from .common import PairCollector, centre_extents, emit, one_radius, radius_of, row_of
+from .common import (PairCollector, centre_extents, copy_size, emit, half_of, halves, one_radius, radius_of, row_of,
+                     set_halves, widest_half, widest_halves)
 from .compress import NATIVE, SLACK_ROWS, scan_compressed
 from .dimension import marker
 from .small import SmallScenes
+from .static_boxes import StaticBoxCells
 
 # The grid has at most this many cells per object (cells are enlarged to fit), so tiny radii in a
 # huge box cannot allocate an unbounded grid. The cap should rarely bind at useful densities: at
@@ -253,7 +256,7 @@ def grid_build(xy, radii, order, last_key, layout, limit, start, key, ids, centr
         start = np.zeros(large + 3, dtype=start.dtype)
     moved = shifts = 0
     for k in range(n):
-        c, c0 = cell_key(xy, k, radii[k], limit, space, dim), last_key[k]
+        c, c0 = cell_key(xy, k, widest_half(radii, k, dim), limit, space, dim), last_key[k]
         key[k] = c
         start[c] += 1
         if c != c0:
@@ -269,7 +272,8 @@ def grid_build(xy, radii, order, last_key, layout, limit, start, key, ids, centr
         c = key[k]
         s = start[c] - 1
         start[c] = s
-        ids[s], skey[s], sradii[s] = order[k], c, radii[k]
+        ids[s], skey[s] = order[k], c
+        copy_size(sradii, s, radii, k, dim)
         for a in range(len(dim)):
             centres[s, a] = xy[k, a]
     return start, moved, shifts  # now start[c] = first slot of bucket c
@@ -283,16 +287,28 @@ def scan_circles(centres, radii, ids, a, s, e, buf, count, dim):
     twice the size through memory. Branch-free: every candidate is written at row `count`, which
     only a hit keeps. Scans are short and a good share of them hit, so a test-then-emit branch is
     mispredicted often: measured 1.9x slower on a quadtree's leaves."""
-    box, i = box_of(centres, a, radius_of(radii, a), dim), ids[a]
+    box, i = box_of(centres, a, sized(radii, a, dim), dim), ids[a]
     for b in range(s, e):
         emit(buf, count, i, ids[b])
-        count += _meets(box, centres, b, radius_of(radii, b), dim)
+        count += _meets(box, centres, b, sized(radii, b, dim), dim)
     return count
 
 
+def sized(sizes, a, dim):
+    """Slot a's size as the box tests take it: one radius (a float) for a ball, so that the
+    kernels over circles and spheres are what they were, or a tuple of half-extents for a box."""
+
+
+@overload(sized, inline="always")
+def _sized(sizes, a, dim):
+    if isinstance(sizes, types.Array) and sizes.ndim == 2:
+        return lambda sizes, a, dim: halves(sizes, a, dim)
+    return lambda sizes, a, dim: radius_of(sizes, a)
+
+
 def box_of(centres, a, r, dim):
-    """The box of radius r around row a of `centres`: (lo, hi) on each axis in turn, a tuple held
-    in registers through a scan."""
+    """The box of size r (a radius, or a tuple of half-extents: `sized`) around row a of
+    `centres`: (lo, hi) on each axis in turn, a tuple held in registers through a scan."""
 
 
 @overload(box_of, inline="always")
@@ -300,17 +316,19 @@ def _box_of(centres, a, r, dim):
     if dim.count == 2:
         def plane(centres, a, r, dim):
             x, y = centres[a, 0], centres[a, 1]
-            return x - r, x + r, y - r, y + r
+            rx, ry = half_of(r, 0, 0), half_of(r, 0, 1)
+            return x - rx, x + rx, y - ry, y + ry
         return plane
 
     def space(centres, a, r, dim):
         x, y, z = centres[a, 0], centres[a, 1], centres[a, 2]
-        return x - r, x + r, y - r, y + r, z - r, z + r
+        rx, ry, rz = half_of(r, 0, 0), half_of(r, 0, 1), half_of(r, 0, 2)
+        return x - rx, x + rx, y - ry, y + ry, z - rz, z + rz
     return space
 
 
 def _meets(box, centres, b, rb, dim):
-    """Whether `box` (box_of) overlaps the box of radius rb around slot b (closed intervals)."""
+    """Whether `box` (box_of) overlaps the box of size rb (`sized`) around slot b (closed intervals)."""
 
 
 @overload(_meets, inline="always")
@@ -320,13 +338,15 @@ def _meets_in(box, centres, b, rb, dim):
     if dim.count == 2:
         def plane(box, centres, b, rb, dim):
             x, y = centres[b, 0], centres[b, 1]
-            return (max(box[0], x - rb) <= min(box[1], x + rb)) & (max(box[2], y - rb) <= min(box[3], y + rb))
+            rx, ry = half_of(rb, 0, 0), half_of(rb, 0, 1)
+            return (max(box[0], x - rx) <= min(box[1], x + rx)) & (max(box[2], y - ry) <= min(box[3], y + ry))
         return plane
 
     def space(box, centres, b, rb, dim):
         x, y, z = centres[b, 0], centres[b, 1], centres[b, 2]
-        return (max(box[0], x - rb) <= min(box[1], x + rb)) & (max(box[2], y - rb) <= min(box[3], y + rb)) \
-            & (max(box[4], z - rb) <= min(box[5], z + rb))
+        rx, ry, rz = half_of(rb, 0, 0), half_of(rb, 0, 1), half_of(rb, 0, 2)
+        return (max(box[0], x - rx) <= min(box[1], x + rx)) & (max(box[2], y - ry) <= min(box[3], y + ry)) \
+            & (max(box[4], z - rz) <= min(box[5], z + rz))
     return space
 
 
@@ -334,11 +354,11 @@ def _meets_in(box, centres, b, rb, dim):
 def scan_circles_in_room(centres, radii, ids, a, s, e, buf, count, dim):
     """scan_circles where buf has a row for every test (the caller checked): no check per row,
     which cost 1.2x on the clustered scene at n = 131072, where there are 7 million tests."""
-    box, i = box_of(centres, a, radius_of(radii, a), dim), ids[a]
+    box, i = box_of(centres, a, sized(radii, a, dim), dim), ids[a]
     for b in range(s, e):
         j = ids[b]
         buf[count, 0], buf[count, 1] = min(i, j), max(i, j)
-        count += _meets(box, centres, b, radius_of(radii, b), dim)
+        count += _meets(box, centres, b, sized(radii, b, dim), dim)
     return count
 
 
@@ -347,9 +367,33 @@ def scan_in_room(centres, radius, ids, a, s, e, buf, count, vector, dim):
     """Slot a against slots s..e-1 into a buf with room for all of them (plus SLACK_ROWS): LANES
     at a time where `vector` (circles only) and the scan is long enough, else one at a time."""
     if vector and len(dim) == 2 and e - s >= VECTOR_FROM:
-        box = box_of(centres, a, radius_of(radius, a), dim)
-        return scan_compressed(centres, radius, ids, a, (box[0], box[1], box[2], box[3]), s, e, buf, count)
+        box = box_of(centres, a, sized(radius, a, dim), dim)
+        return scan_compressed(centres, vector_radii(radius), ids, a, (box[0], box[1], box[2], box[3]), s, e, buf,
+                               count)
     return scan_circles_in_room(centres, radius, ids, a, s, e, buf, count, dim)
+
+
+def vector_radii(radius):
+    """The radii as the vector scan takes them: the balls' radius or radii; over boxes, which it
+    never scans (grid_pairs turns `vector` off for them: `scans_vectors`), an empty stand-in that
+    only lets the branch compile."""
+
+
+@overload(vector_radii, inline="always")
+def _vector_radii(radius):
+    if isinstance(radius, types.Array) and radius.ndim == 2:
+        return lambda radius: np.empty(0)
+    return lambda radius: radius
+
+
+def scans_vectors(radius):
+    """Whether the vector scan can take these sizes: balls yes, boxes no (a constant per compiled form)."""
+
+
+@overload(scans_vectors, inline="always")
+def _scans_vectors(radius):
+    boxes = isinstance(radius, types.Array) and radius.ndim == 2
+    return lambda radius: not boxes
 
 
 @nb.njit(cache=True, inline="always")
@@ -396,7 +440,7 @@ def grid_pairs(ids, centres, sradii, radius, skey, start, layout, limit, vector,
     # Inlined once per value of `vector`, each copy with it constant: a loop that tests it per
     # scan was 5% slower on the uniform scene at n = 131072, where few scans are long. The vector
     # scan reads the centres by column (compress.scan_block).
-    if vector and centres.strides[0] == centres.itemsize:
+    if vector and scans_vectors(radius) and centres.strides[0] == centres.itemsize:
         count, tests = small_against_small(ids, centres, radius, skey, start, strides, first_large, True, buf, dim)
     else:
         count, tests = small_against_small(ids, centres, radius, skey, start, strides, first_large, False, buf, dim)
@@ -406,7 +450,7 @@ def grid_pairs(ids, centres, sradii, radius, skey, start, layout, limit, vector,
     reach = 0.5 * max(limit, 0.0)
     cells, at = np.empty((2, len(dim)), dtype=np.int64), np.empty(len(dim), dtype=np.int64)
     for a in range(first_large, end_large):
-        covered_cells(centres, a, sradii[a] + reach, space, cells, dim)
+        covered_cells(centres, a, sradii, reach, space, cells, dim)
         key, width = first_row(cells, at, space, dim), cells[1, 0] - cells[0, 0] + 1
         for _ in range(rows_in(cells, dim)):
             s, e = start[key], start[key + width]
@@ -417,13 +461,13 @@ def grid_pairs(ids, centres, sradii, radius, skey, start, layout, limit, vector,
 
 
 @nb.njit(cache=True, inline="always")
-def covered_cells(centres, k, reach, space, cells, dim):
-    """Into `cells` (2, d): the first and last cell on each axis (inclusive) that a box of
-    half-width `reach` around row k of `centres` covers, plus one cell on each side, which
+def covered_cells(centres, k, sizes, extra, space, cells, dim):
+    """Into `cells` (2, d): the first and last cell on each axis (inclusive) that the box of row k
+    (`centres`, `sizes`) grown by `extra` on each side covers, plus one cell on each side, which
     absorbs the rounding of the cell index."""
     origin, inverse, last = space[0], space[1], space[2]
     for a in range(len(dim)):
-        x = centres[k, a]
+        x, reach = centres[k, a], half_of(sizes, k, a) + extra
         cells[0, a] = max(cell_of(x - reach, origin[a], inverse[a], last[a]) - 1, 0)
         cells[1, a] = min(cell_of(x + reach, origin[a], inverse[a], last[a]) + 1, int(last[a]))
 
@@ -435,14 +479,14 @@ CELL_REACH_PAD = 1e-9
 
 
 @nb.njit(cache=True, inline="always")
-def reached_cells(centre, reach, space, cells, dim):
+def reached_cells(centre, half, extra, space, cells, dim):
     """Into `cells` (2, d): the first and last cell on each axis (inclusive) that hold every centre
-    within `reach` of `centre` (a tuple) along each axis: cell_of is monotone, so the cells of the
+    within half[a] + extra of `centre` (tuples) along each axis a: cell_of is monotone, so the cells of the
     ends of a slightly grown reach bound them, with no spare cell on each side (covered_cells's):
     on a Galton board, 1375 static tests a frame instead of 3910."""
     origin, inverse, last = space[0], space[1], space[2]
     for a in range(len(dim)):
-        x = centre[a]
+        x, reach = centre[a], half[a] + extra
         grown = reach + CELL_REACH_PAD * (reach + abs(x))
         cells[0, a] = cell_of(x - grown, origin[a], inverse[a], last[a])
         cells[1, a] = cell_of(x + grown, origin[a], inverse[a], last[a])
@@ -500,13 +544,13 @@ def against_statics(q_ids, q_centres, q_radii, q_end, s_objects, s_centres, s_ra
     cells, at = np.empty((2, d), dtype=np.int64), np.empty(d, dtype=np.int64)
     count = tests = 0
     for q in range(q_end):
-        centre, r, i = row_of(q_centres, q, dim), q_radii[q], q_ids[q]
+        centre, r, i = row_of(q_centres, q, dim), halves(q_radii, q, dim), q_ids[q]
         outside = False
         for a in range(d):
-            outside |= (centre[a] + r < s_bounds[a]) | (centre[a] - r > s_bounds[d + a])
+            outside |= (centre[a] + r[a] < s_bounds[a]) | (centre[a] - r[a] > s_bounds[d + a])
         if outside:
             continue
-        reached_cells(centre, r + reach, space, cells, dim)
+        reached_cells(centre, r, reach, space, cells, dim)
         key, width = first_row(cells, at, space, dim), cells[1, 0] - cells[0, 0] + 1
         for _ in range(rows_in(cells, dim)):
             s, e = s_start[key], s_start[key + width]
@@ -520,12 +564,11 @@ def against_statics(q_ids, q_centres, q_radii, q_end, s_objects, s_centres, s_ra
 
 @nb.njit(cache=True, inline="always")
 def _scan_statics(centre, r, i, s, e, s_objects, s_centres, s_radii, buf, count, dim):
-    """Object i's box (`centre`, radius r) against the static slots s..e-1; returns the count."""
+    """Object i's box (`centre`, half-sizes r per axis) against the static slots s..e-1; returns the count."""
     for b in range(s, e):
-        within = r + s_radii[b]
         near = True
         for a in range(len(dim)):
-            near &= abs(s_centres[b, a] - centre[a]) <= within
+            near &= abs(s_centres[b, a] - centre[a]) <= r[a] + half_of(s_radii, b, a)
         if near:
             emit(buf, count, i, s_objects[b])
             count += 1
@@ -536,11 +579,13 @@ def _scan_statics(centre, r, i, s, e, s_objects, s_centres, s_radii, buf, count,
 def large_against_large(centres, sradii, ids, first_large, end, buf, count, tests, dim):
     """Pairs among slots first_large..end-1 (the large bucket): a sweep along x, each candidate
     tested as a scan of one slot. Returns (pairs found, pair tests), counting on from the given ones."""
-    lx = centres[first_large:end, 0] - sradii[first_large:end]
+    lx = np.empty(end - first_large)
+    for a in range(first_large, end):
+        lx[a - first_large] = centres[a, 0] - half_of(sradii, a, 0)
     by_x = np.argsort(lx)
     for u in range(by_x.shape[0]):
         a = first_large + by_x[u]
-        hx = centres[a, 0] + sradii[a]
+        hx = centres[a, 0] + half_of(sradii, a, 0)
         for v in range(u + 1, by_x.shape[0]):
             b = first_large + by_x[v]
             if lx[by_x[v]] > hx:
@@ -554,14 +599,16 @@ def large_against_large(centres, sradii, ids, first_large, end, buf, count, test
 def _insert_slot(ids, centres, skey, sradii, a, dim):
     """Move slot a's whole row back past the slots with a larger key; returns the rows moved."""
     k = skey[a]
-    i, r, centre = ids[a], sradii[a], row_of(centres, a, dim)
+    i, r, centre = ids[a], halves(sradii, a, dim), row_of(centres, a, dim)
     b = a - 1
     while b >= 0 and skey[b] > k:
-        ids[b + 1], skey[b + 1], sradii[b + 1] = ids[b], skey[b], sradii[b]
+        ids[b + 1], skey[b + 1] = ids[b], skey[b]
+        copy_size(sradii, b + 1, sradii, b, dim)
         for t in range(len(dim)):
             centres[b + 1, t] = centres[b, t]
         b -= 1
-    ids[b + 1], skey[b + 1], sradii[b + 1] = i, k, r
+    ids[b + 1], skey[b + 1] = i, k
+    set_halves(sradii, b + 1, r, dim)
     for t in range(len(dim)):
         centres[b + 1, t] = centre[t]
     return a - 1 - b
@@ -607,7 +654,7 @@ def grid_repair(layout, limit, start, descents, slots, dim):
     space = key_space(layout, dim)
     moved = shifts = found = 0
     for a in range(n):
-        c = cell_key(centres, a, sradii[a], limit, space, dim)
+        c = cell_key(centres, a, widest_half(sradii, a, dim), limit, space, dim)
         c0 = skey[a]
         if c != c0:
             moved += 1
@@ -691,6 +738,7 @@ def default_cell(radii: np.ndarray) -> float:
     n = 4096, against 0.03 ms with cells of 16.)"""
     if len(radii) == 0:
         return 0.0
+    radii = widest_halves(radii)  # a box counts as wide as its longest side
     bound = LARGE_RADIUS_IN_MEDIANS * float(np.median(radii))
     return 2.0 * float(radii[radii <= bound].max())
 
@@ -699,6 +747,14 @@ def default_cell(radii: np.ndarray) -> float:
 GRID_CELL_FACTORS = (0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 3.0, 4.0, 6.0)
 GRID_CELL = Knob("cell", sizes(lambda s: default_cell(s.radii) or mean_diameter(s), GRID_CELL_FACTORS),
                  "requested cell size", dims=(2,))
+
+
+def live_sizes(sizes: np.ndarray, alive: np.ndarray | None) -> np.ndarray:
+    """The sizes as the grid's kernels see them, by object: NaN (a row of them for a box) for an
+    object not alive, which puts it in the absent bucket (cell_key)."""
+    if alive is None:
+        return sizes
+    return np.where(alive if sizes.ndim == 1 else alive[:, None], sizes, np.nan)
 
 
 class CellLayout(SmallScenes, BroadPhase):
@@ -725,10 +781,11 @@ class CellLayout(SmallScenes, BroadPhase):
         """The cell size, p and cell cap for these objects, no layout yet, and the one radius of
         them all where the kernels can take it instead of the radii (`specialise`)."""
         self._cell = float(self.params["cell"]) if self.params["cell"] is not None else default_cell(radii)
+        # Boxes: sized as balls by their longest half-extent here, where a cell is chosen.
         self._p = int(self.params["p"] or 0)
         self._max_cells = MAX_CELLS_PER_OBJECT * self.n + CELLS_ROOM[self.dim]
         self._layout = np.zeros(3 * self.dim)
-        self._one = one_radius(radii) if self.params["specialise"] else None
+        self._one = one_radius(radii) if self.params["specialise"] and radii.ndim == 1 else None
         # What stats() says the kernels leave out for this scene.
         self._left_out = {} if self._one is None else {"left_out_radius_reads": 1}
 
@@ -775,13 +832,13 @@ class SquareGrid(CellLayout):
         # Kept across resets, as every backend's collector is: a fresh one's first buffer is too
         # small for a frame's pairs, so the pair search ran twice (rain, rebuilt every frame).
         self._collect = PairCollector()
-        self._statics: StaticCells | None = None
+        self._statics: StaticCells | StaticBoxCells | None = None
 
     def _reset(self, positions, radii):
         if self.dim != 2 and self.params["vector"]:
             raise ValueError(f"{self.name}: vector scans circles only (spheres are scanned one at a time)")
         self._dim = marker(self.dim)
-        self._vector_now = self._vector and self.dim == 2
+        self._vector_now = self._vector and self.dim == 2 and self.shape == "balls"
         self._start_layout(radii)
         n = self.n
         # Slot arrays (ids, centres, keys, radii), double-buffered: the build reads last frame's
@@ -792,7 +849,7 @@ class SquareGrid(CellLayout):
         # The radii as the kernels see them, by object: NaN for an object not alive (see the class
         # docstring). The slots hold the objects that can move (`held`: every one but the statics,
         # which have a grid of their own), by object id.
-        self._live_radii = radii if self.alive is None else np.where(self.alive, radii, np.nan)
+        self._live_radii = live_sizes(radii, self.alive)
         self._held = None if self.static is None else np.flatnonzero(~self.static)
         held = np.arange(n, dtype=np.int64) if self._held is None else self._held
         m = len(held)
@@ -801,7 +858,7 @@ class SquareGrid(CellLayout):
         self._slots = (held.copy(), np.empty((m, d), order="F"), np.full(m, -1, dtype=np.int64),
                        self._live_radii[held])
         self._spare = (np.empty(m, dtype=np.int64), np.empty((m, d), order="F"), np.empty(m, dtype=np.int64),
-                       np.empty(m))
+                       np.empty_like(self._slots[3]))
         self._key, self._xy = np.empty(m, dtype=np.int64), np.empty((m, d), order="F")
         self._input_order = held.copy()
         self._start = np.zeros(0, dtype=np.int64)
@@ -831,13 +888,23 @@ class SquareGrid(CellLayout):
         # Kept raw, made a dict only when asked: building it every frame costs 4% of a frame at n = 2048.
         self._counters = {"moved": moved, "relayout": int(relayout), "swaps": swaps}
 
+    def _reshape(self, positions):
+        """Boxes took new extents (bodies rotated): the slots take them in place and the frame is
+        an update as any other (a box grown past a cell changes key, to the large bucket); the
+        statics never change theirs (the interface checks), so their grid stays."""
+        self.radii = self._all_radii
+        self._live_radii = live_sizes(self.radii, self.alive)
+        ids, _, _, sradii = self._slots
+        sradii[:] = self._live_radii[ids]
+        self._update(positions)
+
     def _build_statics(self, positions: np.ndarray) -> None:
         """The statics alive in a grid of their own (cells at least this grid's), or None."""
         self._statics = None
         if self.static is not None:
             ids = np.flatnonzero(self.static if self.alive is None else self.static & self.alive)
             if len(ids):
-                self._statics = StaticCells(positions, self.radii, ids, self._cell)
+                self._statics = static_grid(positions, self.radii, ids, self._cell)
 
     def _set_alive(self, ids: np.ndarray, sradii: np.ndarray) -> None:
         """This frame's arrivals get their radius back, and the objects gone NaN, by object and by
@@ -895,7 +962,7 @@ class SquareGrid(CellLayout):
         if self._statics is not None:
             self._statics.validate(self.static if self.alive is None else self.static & self.alive)
         with np.errstate(over="ignore"):  # a radius near the largest double is small in a cell as wide
-            small = 2.0 * sradii <= self._limit
+            small = 2.0 * widest_halves(sradii) <= self._limit
         assert np.array_equal(small, key < large), "an object is in the wrong bucket for its size"
         narrowest = self._layout[d:2 * d].min()
         assert self._limit < narrowest or narrowest == np.inf, "small objects could span two cells"
@@ -913,6 +980,7 @@ class UniformGrid(SquareGrid):
     """
 
     dims = (2, 3)
+    shapes = ("balls", "boxes")
 
 
 def grid_box_pairs(positions: np.ndarray, radii: np.ndarray) -> np.ndarray:
@@ -920,7 +988,7 @@ def grid_box_pairs(positions: np.ndarray, radii: np.ndarray) -> np.ndarray:
     own.grid's structure at every size, circles or spheres (the exact reference past brute force)."""
     grid = UniformGrid()
     grid.small_scene_n = 0
-    grid.reset(positions, radii)
+    grid.reset(positions, **size_keyword(radii))
     return grid.pairs().copy()
 
 
@@ -934,9 +1002,10 @@ class StaticCells:
         self.ids = ids
         self.grid = UniformGrid(vector=False, cell=max(default_cell(radii[ids]), cell) or None)
         self.grid.small_scene_n = 0  # a structure at every size: against_statics reads its cells
-        self.grid.reset(positions[ids], radii[ids])
+        sizes = radii[ids]
+        self.grid.reset(positions[ids], **size_keyword(sizes))
         self.objects = ids[self.grid._slots[0]]  # each static slot's object id
-        reach = radii[ids, None]
+        reach = per_axis(sizes)
         self.bounds = np.r_[(positions[ids] - reach).min(axis=0), (positions[ids] + reach).max(axis=0)]
         self._dim = marker(positions.shape[1])
         self._collect = PairCollector()
@@ -953,3 +1022,12 @@ class StaticCells:
         """The grid's invariants, and that it holds exactly the objects of the mask `held`."""
         self.grid.validate()
         assert np.array_equal(np.sort(self.objects), np.flatnonzero(held)), "the statics' grid is not the statics alive"
+
+
+def static_grid(positions: np.ndarray, sizes: np.ndarray, ids: np.ndarray,
+                cell: float = 0.0) -> StaticCells | StaticBoxCells:
+    """The statics `ids` in a grid of their own, built once: by centre for balls (StaticCells),
+    in every cell each covers for boxes (StaticBoxCells: long walls stay out of a large bucket)."""
+    if sizes.ndim == 2:
+        return StaticBoxCells(positions, sizes, ids, cell)
+    return StaticCells(positions, sizes, ids, cell)

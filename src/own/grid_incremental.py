@@ -276,7 +276,7 @@ def large_pairs(state, head, layout, limit, buf, count, tests, dim):
     reach = 0.5 * max(limit, 0.0)
     cells, at = np.empty((2, len(dim)), dtype=np.int64), np.empty(len(dim), dtype=np.int64)
     for a in range(first_large, n):  # against the small objects in the cells they cover
-        covered_cells(xy, a, sr[a] + reach, space, cells, dim)
+        covered_cells(xy, a, sr, reach, space, cells, dim)
         key, width = first_row(cells, at, space, dim), cells[1, 0] - cells[0, 0] + 1
         for _ in range(rows_in(cells, dim)):
             s, e = key, key + width

@@ -32,6 +32,7 @@ import numpy as np
 
 from interface.knobs import Knob, fixed
 
+from .common import widest_half
 from .morton import STEP_BITS, bit_length, interleave, pack_steps
 from .small import SmallScenes
 from .statics import StaticsApart
@@ -65,7 +66,7 @@ def loose_keys(centres, sr, frame, depth, keys, dim):
     level_at = np.uint64(d * bits)
     for a in range(centres.shape[0]):
         # The box spans `steps` lattice steps: it fits a cell of 2^k steps from k = bit_length(steps - 1).
-        steps = np.int64(np.ceil(min(2.0 * sr[a] * scale, cells)))
+        steps = np.int64(np.ceil(min(2.0 * widest_half(sr, a, dim) * scale, cells)))
         level = depth - bit_length(max(steps, 1) - 1)
         keys[a] = pack_steps(centres, a, frame, scale, top, bits, dim) | (np.uint64(level) << level_at)
     step_mask = np.uint64((1 << bits) - 1)
@@ -135,6 +136,7 @@ class Quadtree(StaticsApart, SmallScenes, MortonTree):
 
     name = "own.quadtree"
     dims = (2, 3)
+    shapes = ("balls", "boxes")
     defaults = {"capacity": 16, "max_depth": 16, "coherent": True}
     sweeps = (Knob("capacity", fixed([1, 2, 4, 8, 16, 32, 64]), "capacity (objects per leaf)"),
               Knob("max_depth", fixed([4, 6, 8, 10, 12, 16, 24]), "maximum depth"))

@@ -35,17 +35,37 @@ def box_pairs(positions: np.ndarray, radii: np.ndarray, alive: np.ndarray | None
 
 
 def circle_pairs(positions: np.ndarray, radii: np.ndarray) -> PairArray:
-    """Every pair of circles (or spheres) that overlap or touch, sorted by (i, j)."""
+    """Every pair of circles (or spheres) that overlap or touch, sorted by (i, j); for boxes, every
+    pair whose boxes overlap."""
     return narrow_phase(positions, radii, box_pairs(positions, radii))
 
 
-@nb.njit(cache=True)
 def narrow_phase(positions: np.ndarray, radii: np.ndarray, pairs: np.ndarray) -> PairArray:
     """The exact narrow phase shared by every backend: the candidate pairs whose circles (or
-    spheres, positions (n, 3)) truly overlap, distance <= r_i + r_j (touching counts)."""
-    if positions.shape[1] == 3:  # the one choice of a dimension: _touching compiled for each marker
-        return _touching(positions, radii, pairs, SPHERES)
-    return _touching(positions, radii, pairs, CIRCLES)
+    spheres, positions (n, 3)) truly overlap, distance <= r_i + r_j (touching counts); for boxes
+    (half-extents `radii` (n, d)) the pairs whose boxes overlap (closed intervals): the box is the
+    shape. (What a project's shapes inside their boxes touch is its own narrow phase.)"""
+    dim = SPHERES if positions.shape[1] == 3 else CIRCLES
+    if radii.ndim == 2:
+        return _boxes_meeting(positions, radii, pairs, dim)
+    return _touching(positions, radii, pairs, dim)
+
+
+@nb.njit(cache=True)
+def _boxes_meeting(positions, extents, pairs, dim):
+    """narrow_phase over boxes: the candidates whose boxes overlap on every axis, their bounds
+    computed as every exact backend computes them (common.boxes), so that the sets agree bit for bit."""
+    out = np.empty((pairs.shape[0], 2), dtype=pairs.dtype)
+    count = 0
+    for k in range(pairs.shape[0]):
+        i, j = pairs[k, 0], pairs[k, 1]
+        hit = True
+        for a in range(len(dim)):
+            hit &= ((positions[j, a] - extents[j, a] <= positions[i, a] + extents[i, a])
+                    & (positions[i, a] - extents[i, a] <= positions[j, a] + extents[j, a]))
+        out[count, 0], out[count, 1] = i, j  # kept only if they overlap (branch-free)
+        count += hit
+    return out[:count]
 
 
 @nb.njit(cache=True)

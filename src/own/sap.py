@@ -12,7 +12,7 @@ from interface.knobs import Knob, fixed
 
 from .coherent import RepairSchedule
 from .columns import COLUMN_PAD, COLUMNS_FROM_WINDOW, column_prepare, column_sweep
-from .common import PairCollector, emit, gather, insertion_sort
+from .common import PairCollector, emit, gather, half_of, insertion_sort
 from .dimension import marker
 from .parallel import ChunkedPairCollector
 from .radix import radix_argsort, sortable_bits
@@ -100,7 +100,7 @@ def sap_prepare(positions, radii, axis_mode, last_order, incremental, order, wor
     if incremental and n > 0 and last_order[n] == axis:
         gather(positions, radii, last_order[:n], centres, sr, dim)
         for a in range(n):
-            keys[a] = centres[a, axis] - sr[a]
+            keys[a] = centres[a, axis] - half_of(sr, a, axis)
             perm[a] = a
         swaps = insertion_sort(perm, keys, MAX_SWAPS_PER_OBJECT)
         if swaps >= 0:
@@ -108,7 +108,7 @@ def sap_prepare(positions, radii, axis_mode, last_order, incremental, order, wor
                 order[a] = last_order[perm[a]]
     if swaps < 0:
         for i in range(n):
-            keys[i] = positions[i, axis] - radii[i]
+            keys[i] = positions[i, axis] - half_of(radii, i, axis)
         order[:n] = radix_argsort(sortable_bits(keys))
         gather(positions, radii, order[:n], centres, sr, dim)
         for a in range(n):
@@ -116,10 +116,10 @@ def sap_prepare(positions, radii, axis_mode, last_order, incremental, order, wor
     order[n] = axis  # remember the axis the order belongs to
     for a in range(n):  # perm is almost the identity: near-sequential reads
         j = perm[a]
-        r = sr[j]
+        r = half_of(sr, j, axis)
         bounds[0, a], bounds[1, a] = centres[j, axis] - r, centres[j, axis] + r
         for k in range(1, d):
-            c = centres[j, others[k - 1]]
+            c, r = centres[j, others[k - 1]], half_of(sr, j, others[k - 1])
             bounds[2 * k, a], bounds[2 * k + 1, a] = c - r, c + r
     if bounds32.size:
         for row in range(2, 2 * d):
@@ -348,6 +348,7 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
     name = "own.sap"
     method = "sweep"
     dims = (2, 3)
+    shapes = ("balls", "boxes")
     sweeps = (Knob("axis", fixed(["x", "y", "auto"]), "sweep axis", dims=(2,)),
               Knob("axis", fixed(["x", "y", "z", "auto"]), "sweep axis", dims=(3,)),
               Knob("sweep", fixed(["plain", "sparse", "auto"]), "sweep"),
@@ -408,7 +409,7 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         # The order is double-buffered (the repair reads last frame's while it writes this
         # frame's); its last entry is its axis, none yet. Every work array is kept between frames.
         self._order, self._spare_order = np.full(n + 1, -1, dtype=np.int64), np.empty(n + 1, dtype=np.int64)
-        self._work = (np.empty((n, d)), np.empty(n), np.empty(n), np.empty(n, dtype=np.int64))
+        self._work = (np.empty((n, d)), np.empty(self.radii.shape), np.empty(n), np.empty(n, dtype=np.int64))
         self._bounds = np.empty((2 * d, n))  # sorted: lo, hi on the sweep axis, then on each other axis
         self._rows = tuple(self._bounds)  # the strips' form of them (2D): s_lo, s_hi, o_lo, o_hi
         # The strip sweep's first slot and widest box of each strip, and each object's strip (2D);
@@ -600,7 +601,8 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         assert np.array_equal(np.sort(order), np.arange(n)), "sort order is not a permutation"
         built = self._anchor if self._anchor is not None else self._positions  # where the boxes were sorted
         axis = self._stats["axis"]
-        assert np.array_equal(s_lo, built[order, axis] - self._sweep_radii[order]), \
+        halves = self._sweep_radii[order] if self.shape == "balls" else self._sweep_radii[order, axis]
+        assert np.array_equal(s_lo, built[order, axis] - halves), \
             "sorted bounds are not their objects'"
         starts = self._strip_start[:self._strips + 1] if self._strips else np.array([0, n])
         assert starts[0] == 0 and starts[-1] == n and (np.diff(starts) >= 0).all(), "strips do not tile the order"

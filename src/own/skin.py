@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numba as nb
 
-from .common import emit
+from .common import emit, half_of
 
 # The rule, after each build (`lived` frames, its skin adding `extra` pairs per object to those
 # that overlapped):
@@ -54,14 +54,14 @@ def largest_step(positions, built, dim):
 
 @nb.njit(cache=True)
 def filter_pairs(candidates, positions, radii, dim, buf):
-    """The candidates whose boxes overlap now (closed intervals), in the list's order."""
+    """The candidates whose boxes overlap now (closed intervals), in the list's order; `radii`: the
+    balls' radii or the boxes' half-extents (common.half_of)."""
     count = 0
     for k in range(candidates.shape[0]):
         i, j = candidates[k, 0], candidates[k, 1]
-        reach = radii[i] + radii[j]
         meet = True
         for a in range(len(dim)):
-            meet &= abs(positions[i, a] - positions[j, a]) <= reach
+            meet &= abs(positions[i, a] - positions[j, a]) <= half_of(radii, i, a) + half_of(radii, j, a)
         if meet:
             emit(buf, count, i, j)
             count += 1

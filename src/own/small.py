@@ -16,7 +16,10 @@ from typing import Callable, ClassVar
 import numba as nb
 import numpy as np
 
-from interface.checks import check_positions, check_radii
+from interface.base import size_keyword
+from interface.checks import check_positions
+
+from .common import half_of
 
 # At or below this many objects, no structure. Per frame (update + pairs) against our fastest
 # structure, the incremental grid: at the essay's density 2.8 against 6.1 us at n = 64, and still
@@ -30,10 +33,11 @@ def small_sweep(positions: np.ndarray, radii: np.ndarray, order: np.ndarray, lo:
     """Every pair whose boxes overlap (closed intervals, boxes x -+ r as the reference computes
     them, so the pair set is the reference's bit for bit), in one call: `order` (kept from the
     last call, so nearly sorted when objects moved a little) is insertion-sorted by the boxes'
-    lower x into `lo`, and each box is tested against those that start before it ends."""
+    lower x into `lo`, and each box is tested against those that start before it ends. `radii`:
+    the balls' radii (n,), or the boxes' half-extents (n, 2) (common.half_of)."""
     n = positions.shape[0]
     for k in range(n):
-        lo[k] = positions[order[k], 0] - radii[order[k]]
+        lo[k] = positions[order[k], 0] - half_of(radii, order[k], 0)
     for k in range(1, n):
         v, o, m = lo[k], order[k], k - 1
         while m >= 0 and lo[m] > v:
@@ -44,13 +48,13 @@ def small_sweep(positions: np.ndarray, radii: np.ndarray, order: np.ndarray, lo:
     count = 0
     for a in range(n):
         i = order[a]
-        x1 = positions[i, 0] + radii[i]
-        y0, y1 = positions[i, 1] - radii[i], positions[i, 1] + radii[i]
+        x1 = positions[i, 0] + half_of(radii, i, 0)
+        y0, y1 = positions[i, 1] - half_of(radii, i, 1), positions[i, 1] + half_of(radii, i, 1)
         for b in range(a + 1, n):
             if lo[b] > x1:  # sorted: no later box starts before this one ends
                 break
             j = order[b]  # lo[a] <= lo[b] <= its upper x: the x intervals overlap
-            if positions[j, 1] - radii[j] <= y1 and y0 <= positions[j, 1] + radii[j]:
+            if positions[j, 1] - half_of(radii, j, 1) <= y1 and y0 <= positions[j, 1] + half_of(radii, j, 1):
                 out[count, 0], out[count, 1] = min(i, j), max(i, j)
                 count += 1
     return out[:count]
@@ -74,23 +78,27 @@ class SmallScenes:
             if name in cls.__dict__:
                 setattr(cls, name, _unless_small(cls.__dict__[name], answer))
 
-    def reset(self, positions, radii, static=None, alive=None) -> None:
+    def reset(self, positions, radii=None, static=None, alive=None, *, extents=None) -> None:
         pos = self._positions_to_reset(positions)
-        radii = check_radii(radii, pos.shape[0])
+        sizes = self._sizes_to_reset(radii, extents, pos.shape[0])
         if pos.shape[0] > self.small_scene_n or pos.shape[1] != 2 or static is not None or alive is not None:
             self._small = None  # statics and spawning go the base class's way (BroadPhase.lifecycle)
-            super().reset(pos, radii, static, alive)
+            super().reset(pos, **size_keyword(sizes), static=static, alive=alive)
             return
-        self.radii, self.n, self.objects, self._small, self._built = radii, pos.shape[0], pos.shape[0], pos, True
+        self.radii, self.n, self.objects, self._small, self._built = sizes, pos.shape[0], pos.shape[0], pos, True
+        self._all_radii, self._static_home = sizes, None
         self._order, self._lo = np.arange(self.n, dtype=np.int64), np.empty(self.n)
         self._stats = {"small_scene": 1}
 
-    def update(self, positions, alive=None) -> None:
+    def update(self, positions, alive=None, *, extents=None) -> None:
         if self._small is None:
-            super().update(positions, alive)
-        elif alive is not None:  # objects appear or go: from now on, the base class's way
+            super().update(positions, alive, extents=extents)
+            return
+        if extents is not None and self._reshaped(extents):
+            self.radii = self._all_radii
+        if alive is not None:  # objects appear or go: from now on, the base class's way
             self._small = None
-            super().reset(positions, self.radii, None, alive)
+            super().reset(positions, **size_keyword(self.radii), alive=alive)
         else:
             self._small = check_positions(positions, self.n, dims=(self.dim,))
 

@@ -3,8 +3,9 @@
 BroadPhase's "rebuild" lifecycle hands a backend the objects alive and drops the pairs of two
 statics after the search: the statics are still sorted, inserted and tested against each other
 every frame. `StaticsApart` leaves them out of the backend's structure, which holds the moving
-objects alive only, and keeps them in `StaticCells`, a grid built once (again only when a static
-appears or goes); each frame the movers are tested against it. Engines keep their own means: no
+objects alive only, and keeps them in a grid built once (again only when a static appears or
+goes: `StaticCells` by centre for balls, `StaticBoxCells` in every cell each covers for boxes);
+each frame the movers are tested against it. Engines keep their own means: no
 engine's time includes this code.
 """
 
@@ -12,13 +13,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .grid import StaticCells
+from .grid import StaticCells, default_cell, static_grid
+from .static_boxes import StaticBoxCells
 
 
 class StaticsApart:
     """Mixin, first in the bases of a backend of ours whose lifecycle is "rebuild"."""
 
-    _static_cells: StaticCells | None = None
+    _static_cells: StaticCells | StaticBoxCells | None = None
     # BroadPhase.pairs has no pairs of two statics to drop: they are never in the structure. (The
     # statics' grid is own.grid's, in either dimension.)
     statics_held_apart = True
@@ -33,7 +35,10 @@ class StaticsApart:
         cells = self._static_cells
         # Built anew at a reset (the scene may be another) or when the statics alive changed.
         if not self._built or cells is None or not np.array_equal(cells.ids, statics):
-            self._static_cells = StaticCells(positions, self._all_radii, statics) if len(statics) else None
+            # Static boxes: cells about a mover's size, what a mover's box is looked up by.
+            boxes = self._all_radii.ndim == 2
+            cell = default_cell(self._all_radii[alive & ~self.static]) if boxes else 0.0
+            self._static_cells = static_grid(positions, self._all_radii, statics, cell) if len(statics) else None
         self._alive_ids = np.flatnonzero(alive & ~self.static)
         self.radii, self.n = self._all_radii[self._alive_ids], len(self._alive_ids)
         self._held_positions = np.ascontiguousarray(positions[self._alive_ids])

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .common import emit, gather
+from .common import emit, gather, half_of
 from .dimension import CIRCLES
 
 # Strips pay once the plain sweep would test at least this many pairs per object, and the strips
@@ -48,11 +48,11 @@ def strip_plan(positions, radii, axis_mode, always, last_axis):
     x0, x1, y0, y1 = np.inf, -np.inf, np.inf, -np.inf
     widest = total = 0.0
     for i in range(n):
-        r = radii[i]
-        x0, x1 = min(x0, positions[i, 0] - r), max(x1, positions[i, 0] + r)
-        y0, y1 = min(y0, positions[i, 1] - r), max(y1, positions[i, 1] + r)
-        widest = max(widest, r)
-        total += r
+        rx, ry = half_of(radii, i, 0), half_of(radii, i, 1)
+        x0, x1 = min(x0, positions[i, 0] - rx), max(x1, positions[i, 0] + rx)
+        y0, y1 = min(y0, positions[i, 1] - ry), max(y1, positions[i, 1] + ry)
+        widest = max(widest, rx, ry)  # a strip holds the widest box across, whichever the axis
+        total += max(rx, ry)
     axis = axis_mode
     if axis_mode < 0:
         axis = int(y1 - y0 > x1 - x0)
@@ -124,9 +124,8 @@ def strip_prepare(positions, radii, plan, last_order, incremental, order, work, 
         scale, top = cols / (s1 - s0), float(cols - 1)
         quant = perm.view(np.uint64)  # borrowed: the sort keys
         for i in range(n):
-            r = radii[i]
-            k = _strip(positions[i, other] - r, base, inv_height, last)
-            q = min((positions[i, axis] - r - s0) * scale, top)
+            k = _strip(positions[i, other] - half_of(radii, i, other), base, inv_height, last)
+            q = min((positions[i, axis] - half_of(radii, i, axis) - s0) * scale, top)
             quant[i] = np.uint64(k) * np.uint64(cols) + np.uint64(q)
         source = counting_argsort(quant, strips * cols)
         gather(positions, radii, source, xy, sr, CIRCLES)
@@ -140,9 +139,9 @@ def strip_prepare(positions, radii, plan, last_order, incremental, order, work, 
     k_last, widest = -1, 0.0  # the strip of the slots before, and its widest box so far
     for a in range(n):  # perm is almost the identity: near-sequential reads
         j = perm[a]
-        r = sr[j]
+        r, ro = half_of(sr, j, axis), half_of(sr, j, other)
         s_lo[a], s_hi[a] = xy[j, axis] - r, xy[j, axis] + r
-        o_lo[a], o_hi[a] = xy[j, other] - r, xy[j, other] + r
+        o_lo[a], o_hi[a] = xy[j, other] - ro, xy[j, other] + ro
         k = strip_of[a]
         if k != k_last:  # slots come strip by strip: a branch taken once per strip
             if k_last >= 0:
@@ -180,11 +179,11 @@ def _slot_strips(xy, sr, axis, base, inv_height, last, strip_of, keys, perm):
     other = 1 - axis
     spans = 0
     for a in range(xy.shape[0]):
-        r = sr[a]
+        r = half_of(sr, a, other)
         k = _strip(xy[a, other] - r, base, inv_height, last)
         spans = max(spans, _strip(xy[a, other] + r, base, inv_height, last) - k)
         strip_of[a] = k
-        keys[a] = xy[a, axis] - r
+        keys[a] = xy[a, axis] - half_of(sr, a, axis)
         perm[a] = a
     return spans <= 1
 

@@ -30,7 +30,7 @@ import numpy as np
 from interface.base import BroadPhase
 
 from .coherent import RepairSchedule, lattice_frame, resort
-from .common import PairCollector, gather
+from .common import PairCollector, gather, half_of
 from .dimension import marker
 from .morton import bit_length
 from .skin import SkinSchedule, filter_pairs, largest_step
@@ -53,9 +53,11 @@ REFIT_RETRY = 8
 
 
 @nb.njit(cache=True, inline="always")
-def set_box(box, a, centres, j, r, dim):
-    """Slot a of `box` (rows lo, hi of each axis): the box of object j of `centres`, radius r."""
+def set_box(box, a, centres, j, sizes, dim):
+    """Slot a of `box` (rows lo, hi of each axis): the box of object j of `centres`, of size
+    sizes[j] (a radius, or half-extents: common.half_of)."""
     for axis in range(len(dim)):
+        r = half_of(sizes, j, axis)
         box[2 * axis, a], box[2 * axis + 1, a] = centres[j, axis] - r, centres[j, axis] + r
 
 
@@ -89,7 +91,7 @@ def build_tree(key_kernel, node_kernel, positions, radii, last_order, order, wor
     for a in range(n):  # perm is almost the identity: near-sequential reads
         j = perm[a]
         order[a] = j if fresh else last_order[j]
-        set_box(box, a, centres, j, sr[j], dim)
+        set_box(box, a, centres, j, sr, dim)
     nodes = node_kernel(keys, depth, capacity, dim)
     return nodes, tree_bounds(nodes, box, dim), swaps
 
@@ -100,7 +102,7 @@ def refit(positions, radii, order, box, nodes, dim):
     table: the tree keeps its leaves, wherever their objects have gone."""
     for a in range(order.shape[0]):
         j = order[a]
-        set_box(box, a, positions, j, radii[j], dim)
+        set_box(box, a, positions, j, radii, dim)
     return tree_bounds(nodes, box, dim)
 
 
@@ -166,7 +168,8 @@ class MortonTree(BroadPhase):
         # The order is double-buffered (the repair reads last frame's while it writes this
         # frame's); -1 first: none yet. Every work array is kept between frames.
         self._order, self._spare_order = np.full(n, -1, dtype=np.int64), np.empty(n, dtype=np.int64)
-        self._work = (np.empty((n, dim)), np.empty(n), np.empty(n, dtype=np.uint64), np.empty(n, dtype=np.int64))
+        self._work = (np.empty((n, dim)), np.empty(radii.shape), np.empty(n, dtype=np.uint64),
+                      np.empty(n, dtype=np.int64))
         self._box = np.empty((2 * dim, n))  # by column: scans compare four (six) contiguous runs
         self._lattice = np.zeros(dim + 1)  # (x0, y0, size) of the lattice square, (x0, y0, z0, size) cube; none yet
         self._schedule = RepairSchedule()

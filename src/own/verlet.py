@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from interface.base import BroadPhase
+from interface.base import BroadPhase, size_keyword
 from interface.checks import shown
 from interface.knobs import Knob, fixed, mean_diameter, sizes
 
@@ -48,6 +48,7 @@ class VerletList(StaticsApart, BroadPhase):
 
     name, method = "own.verlet", "grid"
     dims = (2, 3)
+    shapes = ("balls", "boxes")
     defaults = {"skin": None, "every": None, "precision": "float64", "fat": False}
     sweeps = (Knob("skin", sizes(mean_diameter, SKIN_FACTORS), "skin", trial_frames=TRIAL_FRAMES),
               Knob("every", fixed([2, 5, 10, 20]), "rebuild every k frames", period=True),
@@ -105,7 +106,7 @@ class VerletList(StaticsApart, BroadPhase):
         if self._built_skin == self._skin:
             self._grid.update(positions)
         else:
-            self._grid.reset(positions, self._radii + 0.5 * self._skin)
+            self._grid.reset(positions, **size_keyword(self._radii + 0.5 * self._skin))
             self._built_skin = self._skin
         self._list = self._grid.pairs()
         self._anchor = positions.copy()  # where the list was built

@@ -1,5 +1,6 @@
 """Scene files: CSV with a header `x,y,r` and optional `vx,vy`, one circle per line; with a `z`
-column (and `vz` where velocities are given) one sphere per line.
+column (and `vz` where velocities are given) one sphere per line. Boxes: `hx,hy` (with `z`, also
+`hz`), their half-extents, in place of `r`.
 
 An optional first line `# box: xmin,ymin,xmax,ymax` (spheres: `xmin,ymin,zmin,xmax,ymax,zmax`)
 gives the walls; without it the box is the bounding box of the objects. Every problem is reported as a SceneFileError naming file and line.
@@ -21,6 +22,8 @@ from .scene import Scene, check_box
 
 REQUIRED = ("x", "y", "r")
 OPTIONAL = ("vx", "vy", "z", "vz")
+HALVES = ("hx", "hy", "hz")  # a box's half-extents, in place of r
+COLUMNS = REQUIRED + OPTIONAL + HALVES
 BOX_PREFIX = "# box:"
 SEPARATORS = {",": "commas", ";": "semicolons", "\t": "tabs"}
 
@@ -71,12 +74,14 @@ def load_scene(path: str | os.PathLike, name: str | None = None) -> Scene:
     found = "" if separator == "," else f" (columns separated by {SEPARATORS[separator]} here)"
     header = [h.strip().lower() for h in rows[0]]
     header_line = first + 1
-    missing = [c for c in REQUIRED if c not in header]
-    extra = [c for c in header if c not in REQUIRED + OPTIONAL]
+    boxes = "r" not in header and "hx" in header
+    required = ("x", "y", *HALVES[:3 if "z" in header else 2]) if boxes else REQUIRED
+    missing = [c for c in required if c not in header]
+    extra = [c for c in header if c not in required + OPTIONAL]
     if missing or extra or len(set(header)) != len(header):
         raise SceneFileError(
-            f"{path}, line {header_line}: header must be x,y,r with optional vx,vy (spheres: z and vz); "
-            f"got {','.join(header)}"
+            f"{path}, line {header_line}: header must be x,y,r with optional vx,vy (spheres: z and vz), or "
+            f"x,y,hx,hy for boxes (with z, hz); got {','.join(header)}"
             + (f" (missing {','.join(missing)})" if missing else "")
             + (f" (unknown {','.join(extra)})" if extra else "") + found
         )
@@ -88,7 +93,7 @@ def load_scene(path: str | os.PathLike, name: str | None = None) -> Scene:
         raise SceneFileError(f"{path}, line {header_line}: spheres with velocities need vz as well as vx,vy")
     dim = 3 if "z" in header else 2
     col = {c: header.index(c) for c in header}
-    values = np.zeros((len(rows) - 1, len(REQUIRED + OPTIONAL)))
+    values = np.zeros((len(rows) - 1, len(COLUMNS)))
     kept = 0
     for k, row in enumerate(rows[1:]):
         where = f"{path}, line {header_line + 1 + k}"
@@ -97,19 +102,22 @@ def load_scene(path: str | os.PathLike, name: str | None = None) -> Scene:
         if len(row) != len(header):
             raise SceneFileError(f"{where}: expected {len(header)} columns ({','.join(header)}), found {len(row)}"
                                  + found)
-        for slot, c in enumerate(REQUIRED + OPTIONAL):
+        for slot, c in enumerate(COLUMNS):
             if c in col:
                 values[kept, slot] = _number(row[col[c]], where + found, c)
-        if values[kept, 2] < 0:
-            raise SceneFileError(f"{where}: radius is negative: {values[kept, 2]:g}")
+                if values[kept, slot] < 0 and c in ("r", *HALVES):
+                    raise SceneFileError(f"{where}: {'radius' if c == 'r' else 'half-extent ' + c} is negative: "
+                                         f"{values[kept, slot]:g}")
         kept += 1
     values = values[:kept]
     if kept == 0:
-        raise SceneFileError(f"{path}: no circles after the header line")
-    radii = values[:, 2]
+        raise SceneFileError(f"{path}: no {'boxes' if boxes else 'circles'} after the header line")
     pos, vel = (values[:, [0, 1, 5]], values[:, [3, 4, 6]]) if dim == 3 else (values[:, :2], values[:, 3:5])
+    extents = values[:, 7:7 + dim] if boxes else None
+    radii = None if boxes else values[:, 2]
     if box is None:
-        lo, hi = (pos - radii[:, None]).min(axis=0), (pos + radii[:, None]).max(axis=0)
+        halves = extents if boxes else radii[:, None]
+        lo, hi = (pos - halves).min(axis=0), (pos + halves).max(axis=0)
         pad = np.where(hi > lo, 0.0, 1.0)  # a degenerate extent still needs a box
         box = tuple((lo - pad).tolist() + (hi + pad).tolist())
     else:
@@ -117,14 +125,16 @@ def load_scene(path: str | os.PathLike, name: str | None = None) -> Scene:
             box = check_box(box, dim)
         except ValueError as exc:
             raise SceneFileError(f"{path}, line 1: bad box line ({exc})") from None
-    return Scene(pos, radii, vel, box=box, name=name or path.stem, meta={"dist": "file", "file": str(path)})
+    return Scene(pos, radii, vel, box=box, name=name or path.stem, meta={"dist": "file", "file": str(path)},
+                 extents=extents)
 
 
 def save_scene(scene: Scene, path: str | os.PathLike) -> Path:
     """Write `scene` (with its box and velocities) so that load_scene gives it back exactly."""
     path = Path(path)
-    header = "x,y,z,r,vx,vy,vz" if scene.dim == 3 else "x,y,r,vx,vy"
-    data = np.column_stack([scene.positions, scene.radii, scene.velocities])
+    size = ",".join(HALVES[:scene.dim]) if scene.extents is not None else "r"
+    header = f"x,y,z,{size},vx,vy,vz" if scene.dim == 3 else f"x,y,{size},vx,vy"
+    data = np.column_stack([scene.positions, scene.sizes, scene.velocities])
     # Write to a temporary file and rename, so an interrupted save never leaves half a scene.
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:

@@ -114,7 +114,9 @@ class FramePairs(Sequence):
 @dataclass(frozen=True)
 class Trajectory:
     """Frames of one scene: positions (frames, n, dim), plus the exact pairs of each frame; `alive`
-    (frames, n) says which objects exist in each frame (None: all of them, always)."""
+    (frames, n) says which objects exist in each frame (None: all of them, always); `extents`
+    (frames, n, d), boxes' half-extents in each frame where they change (rotating bodies; None:
+    the scene's sizes in every frame)."""
 
     scene: Scene
     positions: np.ndarray
@@ -122,9 +124,18 @@ class Trajectory:
     contacts: FramePairs
     velocities: np.ndarray  # (frames, n, dim), the velocity at the start of each frame
     alive: np.ndarray | None = None
+    extents: np.ndarray | None = None
 
     def alive_at(self, frame: int) -> np.ndarray | None:
         return None if self.alive is None else self.alive[frame]
+
+    def extents_at(self, frame: int) -> np.ndarray | None:
+        """The boxes' half-extents in `frame` where they change from frame to frame, else None."""
+        return None if self.extents is None else self.extents[frame]
+
+    def sizes_at(self, frame: int) -> np.ndarray:
+        """What a backend holds in `frame`: radii (n,), or the boxes' half-extents (n, d)."""
+        return self.scene.sizes if self.extents is None else self.extents[frame]
 
     @property
     def frames(self) -> int:
@@ -134,7 +145,8 @@ class Trajectory:
         """The first `frames` frames (for shorter trials on the same scene)."""
         k = max(1, min(frames, self.frames))
         return Trajectory(self.scene, self.positions[:k], self.box_pairs[:k], self.contacts[:k], self.velocities[:k],
-                          None if self.alive is None else self.alive[:k])
+                          None if self.alive is None else self.alive[:k],
+                          None if self.extents is None else self.extents[:k])
 
     def renumbered(self, order: np.ndarray) -> "Trajectory":
         """The same motion with the objects renumbered: new object k is old object order[k]
@@ -154,12 +166,14 @@ class Trajectory:
 
         static = None if self.scene.static is None else self.scene.static[order]
         scene = self.scene.with_(positions=self.scene.positions[order], radii=self.scene.radii[order],
-                                 velocities=self.scene.velocities[order], static=static)
+                                 velocities=self.scene.velocities[order], static=static,
+                                 extents=None if self.scene.extents is None else self.scene.extents[order])
         return Trajectory(scene, np.ascontiguousarray(self.positions[:, order]),
                           FramePairs([None if p is None else mapped(p) for p in self.box_pairs]),
                           FramePairs([None if p is None else mapped(p) for p in self.contacts]),
                           np.ascontiguousarray(self.velocities[:, order]),
-                          None if self.alive is None else np.ascontiguousarray(self.alive[:, order]))
+                          None if self.alive is None else np.ascontiguousarray(self.alive[:, order]),
+                          None if self.extents is None else np.ascontiguousarray(self.extents[:, order]))
 
     @cached_property
     def swept_contacts(self) -> np.ndarray:
@@ -214,11 +228,13 @@ def simulate(scene: Scene, frames: int, dt: float = FRAME_DT, verify: Collection
             continue
         responds = scene.moves and scene.responds
         if f in verified or responds:
-            found = box_pairs(pos, scene.radii)
-            touching = narrow_phase(pos, scene.radii, found)
+            found = box_pairs(pos, scene.sizes)
+            touching = narrow_phase(pos, scene.sizes, found)
             if f in verified:
                 boxes.store(f, found, "boxes")
                 contacts.store(f, touching, "contacts")
+            if responds and scene.extents is not None:  # the essay's response is between circles
+                touching = narrow_phase(pos, scene.radii, box_pairs(pos, scene.radii))
             del found
         if scene.moves:
             if responds:
@@ -240,12 +256,13 @@ def replay(scene: Scene, frames: int, dt: float = FRAME_DT, verify: Collection[i
     for f in tqdm(sorted(verified), desc="exact pairs of the recorded frames", unit="frame", delay=2,
                   file=sys.stderr, leave=False):
         pos = record.positions[f]
-        found = box_pairs(pos, scene.radii, None if record.alive is None else record.alive[f], scene.static)
+        sizes = scene.sizes if record.extents is None else record.extents[f]
+        found = box_pairs(pos, sizes, None if record.alive is None else record.alive[f], scene.static)
         boxes.store(f, found, "boxes")
-        contacts.store(f, narrow_phase(pos, scene.radii, found), "contacts")
+        contacts.store(f, narrow_phase(pos, sizes, found), "contacts")
     velocities = np.zeros_like(record.positions)
     velocities[:-1] = np.diff(record.positions, axis=0) / dt
-    return Trajectory(scene, record.positions, boxes, contacts, velocities, record.alive)
+    return Trajectory(scene, record.positions, boxes, contacts, velocities, record.alive, record.extents)
 
 
 def kinetic_energy(velocities: np.ndarray, radii: np.ndarray) -> float:

@@ -1,4 +1,4 @@
-"""The scene record: n circles (or spheres) in a box."""
+"""The scene record: n circles (or spheres), or n axis-aligned boxes, in a box."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from interface.checks import FloatArray, check_mask, check_positions, check_radii
+from interface.checks import FloatArray, check_extents, check_mask, check_positions, check_radii
 
 # The essay's arena: a 2000 x 2000 px box.
 ESSAY_BOX: tuple[float, float, float, float] = (0.0, 0.0, 2000.0, 2000.0)
@@ -47,6 +47,10 @@ class Scene:
     where given, is recorded motion (`scenes.recorded.Recording`, or a family recorded with an
     engine) that replaces the essay's: its `record(frames)` gives the frames, which objects are
     alive in each, and `digest()` names them.
+
+    Boxes: `extents` (n, d), each object's half-extent on each axis (its box is the shape every
+    check uses); `radii` are then their bounding circles' (or spheres'), given or computed, which
+    is what the circle model of the same scene would hand a backend.
     """
 
     positions: FloatArray
@@ -60,11 +64,16 @@ class Scene:
     meta: dict = field(default_factory=dict, compare=False)
     static: np.ndarray | None = field(default=None, compare=False)
     motion: object | None = field(default=None, compare=False)
+    extents: FloatArray | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         pos = check_positions(self.positions, dims=DIMS)
         n, dim = pos.shape
         object.__setattr__(self, "positions", pos)
+        if self.extents is not None:
+            object.__setattr__(self, "extents", check_extents(self.extents, n, dim))
+            if self.radii is None:
+                object.__setattr__(self, "radii", np.sqrt((self.extents ** 2).sum(axis=1)))
         object.__setattr__(self, "radii", check_radii(self.radii, n))
         object.__setattr__(self, "velocities", check_positions(self.velocities, n, "velocities", (dim,)))
         object.__setattr__(self, "box", check_box(self.box, dim))
@@ -80,6 +89,16 @@ class Scene:
         return int(self.positions.shape[1])
 
     @property
+    def shape(self) -> str:
+        """"boxes" where the scene has extents, else "balls" (circles, spheres)."""
+        return "balls" if self.extents is None else "boxes"
+
+    @property
+    def sizes(self) -> FloatArray:
+        """What a backend is handed: radii (n,) of balls, or half-extents (n, d) of boxes."""
+        return self.radii if self.extents is None else self.extents
+
+    @property
     def static_share(self) -> float:
         """The share of objects that never move."""
         return float(self.static.mean()) if self.static is not None and self.n else 0.0
@@ -89,6 +108,15 @@ class Scene:
         if self.n == 0:
             return 0.0, 0.0
         return float(self.radii.min()), float(self.radii.max())
+
+    @property
+    def sizes_in_words(self) -> str:
+        """The objects' sizes as the studies print them: the radii's range, or the boxes' half-extents'."""
+        if self.extents is None:
+            return f"radii {self.radius_range[0]:g}..{self.radius_range[1]:g}"
+        if self.n == 0:
+            return "boxes"
+        return f"boxes of half-extents {self.extents.min():g}..{self.extents.max():g}"
 
     def with_(self, **changes: object) -> "Scene":
         """A copy with some fields replaced (validated again)."""

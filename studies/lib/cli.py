@@ -92,15 +92,19 @@ def compact_names(chosen: list[str]) -> list[str]:
     return out
 
 
-def in_dimension(chosen: list[str], dim: int) -> list[str]:
-    """The chosen backends that work in `dim` dimensions; the others are named in one line (by
-    family) as not run, and a choice of none at all is a CliError."""
+def in_dimension(chosen: list[str], dim: int, shape: str = "balls") -> list[str]:
+    """The chosen backends that work in `dim` dimensions on objects of this `shape` ("balls",
+    "boxes"); the others are named in one line (by family) as not run, and a choice of none at all
+    is a CliError."""
     planar = [n for n in chosen if not engines.works_in(n, dim)]
-    kept = [n for n in chosen if n not in planar]
+    balls_only = [n for n in chosen if n not in planar and not engines.works_in(n, dim, shape)]
+    kept = [n for n in chosen if n not in planar and n not in balls_only]
     if planar:
         print(f"not run in {dim}D, they work in 2D only: {', '.join(compact_names(planar))}")
+    if balls_only:
+        print(f"not run on boxes, they take circles and spheres only: {', '.join(compact_names(balls_only))}")
     if not kept:
-        raise CliError(f"none of the backends chosen works in {dim}D ({', '.join(planar)}); "
+        raise CliError(f"none of the backends chosen works in {dim}D on {shape} ({', '.join(planar + balls_only)}); "
                        "see --list with the same --dim")
     return kept
 

@@ -32,6 +32,7 @@ from typing import Any, Callable
 import numpy as np
 
 import engines
+from interface.base import size_keyword
 from interface.pairs import is_canonical, keys
 from own.reference import narrow_phase
 from scenes import Scene
@@ -94,6 +95,8 @@ def scene_id(scene: Scene) -> str:
     digest = hashlib.sha1()
     for array in (scene.positions, scene.radii, scene.velocities):
         digest.update(np.ascontiguousarray(array).tobytes())
+    if scene.extents is not None:
+        digest.update(b"boxes" + np.ascontiguousarray(scene.extents).tobytes())
     digest.update(repr((scene.box, scene.moves, scene.walls, scene.responds)).encode())
     if scene.static is not None:
         digest.update(np.packbits(scene.static).tobytes())
@@ -144,16 +147,16 @@ def measure(job: Job, traj: Trajectory, repeat: int, ready: Callable[[], None] |
 
     A first timed frame over the job's budget is kept with a "skipped" status and ends the repeat.
     """
-    radii = traj.scene.radii
     backend = engines.create(job.backend, **job.params)
     failed = True
     try:
         compiling = clock.seconds if clock else 0.0
         start = time.perf_counter()
-        backend.reset(traj.positions[0], radii, static=traj.scene.static, alive=traj.alive_at(0))
+        backend.reset(traj.positions[0], static=traj.scene.static, alive=traj.alive_at(0),
+                      **size_keyword(traj.sizes_at(0)))
         backend.update(traj.positions[0])
         first = _checked(backend.pairs(), traj.scene.n)
-        narrow_phase(traj.positions[0], radii, first)
+        narrow_phase(traj.positions[0], traj.sizes_at(0), first)
         compiling = (clock.seconds if clock else 0.0) - compiling
         setup = time.perf_counter() - start - compiling
         if ready:
@@ -164,15 +167,18 @@ def measure(job: Job, traj: Trajectory, repeat: int, ready: Callable[[], None] |
         gc.disable()  # a collection inside a timed frame would be noise, not the backend's cost
         try:
             for f in range(1, traj.frames):
-                pos, alive = traj.positions[f], traj.alive_at(f)
+                pos, alive, extents = traj.positions[f], traj.alive_at(f), traj.extents_at(f)
                 t0 = time.perf_counter()
-                backend.update(pos, alive)
+                if extents is None:
+                    backend.update(pos, alive)
+                else:  # boxes that rotate: the backend takes their new extents with the frame's update
+                    backend.update(pos, alive, extents=extents)
                 t1 = time.perf_counter()
                 candidates = backend.pairs()
                 t2 = time.perf_counter()
                 _checked(candidates, traj.scene.n)  # untimed: between the stages
                 t3 = time.perf_counter()
-                narrow_phase(pos, radii, candidates)
+                narrow_phase(pos, traj.sizes_at(f), candidates)
                 t4 = time.perf_counter()
                 got = keys(candidates, traj.scene.n)
                 rows.append({
@@ -376,7 +382,8 @@ def _crash_status(code: int | None) -> str:
 
 
 def scene_columns(s: Scene) -> dict[str, Any]:
-    """The columns that describe the scene, the same on every row of a run."""
+    """The columns that describe the scene, the same on every row of a run (`shape`: "balls" or
+    "boxes"; a box scene's radii are its bounding circles')."""
     r_min, r_max = s.radius_range
-    return {"scene": s.name, "dist": s.meta.get("dist", ""), "n": s.n, "dim": s.dim, "radius_min": r_min, "radius_max": r_max,
-            "speed": s.meta.get("speed", ""), "seed": s.meta.get("seed", "")}
+    return {"scene": s.name, "dist": s.meta.get("dist", ""), "n": s.n, "dim": s.dim, "shape": s.shape,
+            "radius_min": r_min, "radius_max": r_max, "speed": s.meta.get("speed", ""), "seed": s.meta.get("seed", "")}

@@ -32,11 +32,11 @@ COLUMNS = [
     "backend", "params", "experiment", "label", "scene", "dist", "n", "dim", "radius_min", "radius_max", "speed", "seed",
     "repeat", "frame", "t_update_s", "t_pairs_s", "t_narrow_s", "t_total_s", "t_engine_broadphase_s", "candidates",
     "true_pairs", "missed", "false_positives", "box_pairs", "box_missed", "reports", "t_setup_s", "status", "stats",
-    "tunneled", "peak_rss_mb", "host", "cpu", "job", "t_compile_s",
+    "tunneled", "peak_rss_mb", "host", "cpu", "job", "t_compile_s", "shape",
 ]
 # Columns added since the first version, with the value every earlier row means (dim: circles;
-# compilation: not measured apart, so inside the setup).
-ADDED_COLUMNS = {"dim": 2, "t_compile_s": None}
+# compilation: not measured apart, so inside the setup; shape: circles and spheres).
+ADDED_COLUMNS = {"dim": 2, "t_compile_s": None, "shape": "balls"}
 STAGES = ["update", "pairs", "narrow", "total"]
 WORKER_DIED = "failed: the worker running it died"  # the status of a job no worker lived through
 PARTIAL, FINAL = "results.partial.csv", "results.csv"

@@ -1,0 +1,301 @@
+"""Boxes of any extents through the interface: the exact answer for boxes, our backends that take
+them (exact on random and adversarial box scenes, statics and spawning, boxes that change as
+bodies rotate), every other backend refusing them in one line, and box trajectories read from
+NPZ, CSV and Broadmark's .aabbs files through to the studies."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import engines
+from own.brute import brute_pairs
+from own.grid import grid_box_pairs
+from own.reference import BRUTE_FORCE_LIMIT, box_pairs, narrow_phase
+from own.static_boxes import StaticBoxCells
+from scenes.broadmark import write_aabbs
+from scenes.recorded import TrajectoryFileError, load_trajectory
+from strategies import box_scenes
+from studies import compare
+
+BOX_BACKENDS = [n for n in engines.available() if "boxes" in engines.backend_class(n).shapes]
+BALLS_ONLY = [n for n in engines.available() if n not in BOX_BACKENDS]
+
+
+def as_set(pairs: np.ndarray) -> set[tuple[int, int]]:
+    return set(map(tuple, np.asarray(pairs).tolist()))
+
+
+def check_boxes(name: str, positions, extents, static=None, alive=None) -> None:
+    """The backend's pairs on these boxes against the reference: no miss, no pair twice, exactly
+    the box overlaps for an exact backend."""
+    backend = engines.create(name)
+    backend.reset(positions, extents=extents, static=static, alive=alive)
+    got = backend.pairs()
+    expected = as_set(box_pairs(positions, extents, alive, static))
+    assert len(as_set(got)) == len(got), f"{name}: a pair reported twice"
+    assert expected <= as_set(got), f"{name}: missed {sorted(expected - as_set(got))[:5]}"
+    if backend.exact:
+        assert as_set(got) == expected
+    backend.validate()
+
+
+def test_a_box_backend_of_ours_is_registered():
+    assert {"own.grid", "own.brute", "own.sap", "own.sap_incremental", "own.sap_parallel", "own.bvh", "own.quadtree",
+            "own.verlet"} <= set(BOX_BACKENDS)
+
+
+@pytest.mark.parametrize("name", BALLS_ONLY)
+def test_a_backend_without_boxes_refuses_them_in_one_line(name):
+    backend = engines.create(name)
+    positions = np.random.default_rng(0).uniform(0, 100, (12, 2))
+    with pytest.raises(ValueError, match="does not take boxes") as err:
+        backend.reset(positions, extents=np.ones((12, 2)))
+    assert "\n" not in str(err.value)
+    backend.close()
+
+
+@pytest.mark.parametrize("extents, words", [
+    (np.ones((5, 3)), "extents must have shape (5, 2)"),
+    (np.ones(5), "extents must have shape (5, 2)"),
+    (np.r_[[[1.0, -1.0]], np.ones((4, 2))], "extents row 0 is negative"),
+    (np.r_[np.ones((4, 2)), [[np.nan, 1.0]]], "extents row 4 is not finite"),
+])
+def test_bad_extents_are_one_line_naming_the_problem(extents, words):
+    grid = engines.create("own.grid")
+    with pytest.raises(ValueError, match=re.escape(words)):
+        grid.reset(np.zeros((5, 2)), extents=extents)
+
+
+def test_radii_or_extents_one_of_them_and_extents_only_for_boxes():
+    grid = engines.create("own.grid")
+    with pytest.raises(ValueError, match="not both"):
+        grid.reset(np.zeros((3, 2)), np.ones(3), extents=np.ones((3, 2)))
+    with pytest.raises(ValueError, match="one of them"):
+        grid.reset(np.zeros((3, 2)))
+    grid.reset(np.zeros((3, 2)), np.ones(3))
+    with pytest.raises(ValueError, match="reset with radii"):
+        grid.update(np.zeros((3, 2)), extents=np.ones((3, 2)))
+
+
+def test_a_static_box_that_changes_its_extents_is_refused():
+    grid = engines.create("own.grid")
+    static = np.array([True, False, False])
+    grid.reset(np.zeros((3, 2)), extents=np.ones((3, 2)), static=static)
+    grid.update(np.zeros((3, 2)), extents=np.r_[[[1.0, 1.0]], 2 * np.ones((2, 2))])  # movers may
+    with pytest.raises(ValueError, match="object 0 is static but its extents changed"):
+        grid.update(np.zeros((3, 2)), extents=2 * np.ones((3, 2)))
+
+
+def test_the_narrow_phase_of_boxes_is_their_overlap():
+    rng = np.random.default_rng(4)
+    positions, extents = rng.uniform(0, 50, (300, 2)), rng.uniform(0, 3, (300, 2))
+    everything = np.array([(i, j) for i in range(300) for j in range(i + 1, 300)])
+    assert as_set(narrow_phase(positions, extents, everything)) == as_set(brute_pairs(positions, extents))
+    # Boxes that touch along an edge overlap (closed intervals), as everywhere.
+    assert len(narrow_phase(np.array([[0.0, 0.0], [2.0, 0.5]]), np.ones((2, 2)), np.array([[0, 1]]))) == 1
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_the_reference_past_brute_force_is_exact_on_boxes(dim):
+    rng = np.random.default_rng(dim)
+    n = BRUTE_FORCE_LIMIT + 500
+    positions = rng.uniform(0, 400 if dim == 2 else 60, (n, dim))
+    extents = rng.uniform(0, 2, (n, dim))
+    extents[:40, 0] = rng.uniform(50, 300, 40)  # long boxes, in the grid's large bucket
+    assert as_set(grid_box_pairs(positions, extents)) == as_set(brute_pairs(positions, extents))
+
+
+@pytest.mark.parametrize("name", BOX_BACKENDS)
+@pytest.mark.parametrize("dim", [2, 3])
+@settings(max_examples=40, deadline=None)
+@given(scene=st.data())
+def test_a_box_backend_never_misses_on_random_and_adversarial_boxes(name, dim, scene):
+    if dim not in engines.backend_class(name).dims:
+        pytest.skip(f"{name} works in 2D only")
+    positions, extents = scene.draw(box_scenes(dim=dim))
+    rng = np.random.default_rng(len(positions))
+    check_boxes(name, positions, extents)
+    check_boxes(name, positions, extents, static=rng.random(len(positions)) < 0.3,
+                alive=rng.random(len(positions)) < 0.8)
+
+
+@pytest.mark.parametrize("name", BOX_BACKENDS)
+@pytest.mark.parametrize("dim", [2, 3])
+def test_a_box_backend_follows_boxes_that_move_rotate_spawn_and_go(name, dim):
+    """Frames of movers whose extents change every frame (a rotating body's box), among static
+    walls, with objects appearing and going: every frame exact."""
+    rng = np.random.default_rng(dim)
+    n = 400
+    positions = rng.uniform(0, 300, (n, dim))
+    extents = rng.uniform(1, 4, (n, dim))
+    static = np.zeros(n, dtype=bool)
+    static[:30] = True
+    extents[:30] = 2.0
+    extents[:30, 0] = rng.uniform(40, 150, 30)  # walls
+    alive = rng.random(n) < 0.9
+    backend = engines.create(name)
+    backend.reset(positions, extents=extents, static=static, alive=alive)
+    for frame in range(9):
+        positions = positions.copy()
+        positions[~static] += rng.normal(0, 2, (n - 30, dim))
+        if frame % 3:  # two frames in three the bodies rotate, the third they only move
+            extents = extents.copy()
+            extents[~static] = np.clip(extents[~static] * rng.uniform(0.8, 1.25, (n - 30, dim)), 0, 12)
+        if frame % 2:
+            alive = alive ^ (rng.random(n) < 0.05)
+        backend.update(positions, alive, extents=extents)
+        got = backend.pairs()
+        expected = as_set(box_pairs(positions, extents, alive, static))
+        assert as_set(got) == expected if backend.exact else expected <= as_set(got), f"frame {frame}"
+        assert len(as_set(got)) == len(got)
+    backend.validate()
+
+
+def walls_scene(seed: int = 0):
+    """The walls scene of the issue, smaller: movers of aspect 1 to 4 among long static walls."""
+    rng = np.random.default_rng(seed)
+    n, walls = 1500, 120
+    positions = rng.uniform(0, 2500, (n, 2))
+    extents = rng.uniform(2, 8, (n, 2)) * np.c_[rng.uniform(1, 4, n), np.ones(n)]
+    extents[:walls] = np.c_[rng.uniform(100, 750, walls), np.full(walls, 5.0)]
+    extents[:walls:2] = extents[:walls:2, ::-1]
+    static = np.arange(n) < walls
+    return positions, extents, static
+
+
+@pytest.mark.parametrize("name", BOX_BACKENDS)
+def test_walls_as_boxes_cost_few_candidates_and_as_circles_many(name):
+    positions, extents, static = walls_scene()
+    backend = engines.create(name)
+    backend.reset(positions, extents=extents, static=static)
+    truth = box_pairs(positions, extents, None, static)
+    got = backend.pairs()
+    assert as_set(truth) <= as_set(got) and len(got) <= 1.5 * len(truth)
+    circles = np.sqrt((extents ** 2).sum(axis=1))  # what the circle model hands a backend
+    assert len(box_pairs(positions, circles, None, static)) > 5 * len(truth)
+
+
+def test_static_boxes_are_filed_in_every_cell_they_cover_and_each_pair_found_once():
+    positions, extents, static = walls_scene(1)
+    ids = np.flatnonzero(static)
+    cells = StaticBoxCells(positions, extents, ids, cell=20.0)
+    cells.validate(static)
+    movers = np.flatnonzero(~static)
+    found, _ = cells.pairs_with(movers, positions[movers], extents[movers], len(movers))
+    expected = box_pairs(positions, extents)
+    expected = expected[static[expected[:, 0]] != static[expected[:, 1]]]
+    assert len(found) == len(as_set(found)) and as_set(np.sort(found, axis=1)) == as_set(expected)
+
+
+def rotating_boxes(frames: int = 6, n: int = 60, dim: int = 2, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    positions = rng.uniform(0, 100, (n, dim)) + np.arange(frames)[:, None, None] * rng.normal(0, 1, (n, dim))
+    extents = rng.uniform(0.5, 4, (n, dim)) * rng.uniform(0.7, 1.3, (frames, n, dim))
+    return positions, extents
+
+
+def test_npz_csv_and_broadmark_files_of_boxes_give_the_same_frames_and_pairs(tmp_path):
+    positions, extents = rotating_boxes(dim=3)
+    npz = tmp_path / "boxes.npz"
+    np.savez(npz, positions=positions, extents=extents)
+    frames, n, _ = positions.shape
+    table = pd.DataFrame({"frame": np.repeat(np.arange(frames), n), "id": np.tile(np.arange(n), frames),
+                          **{axis: positions[..., a].ravel() for a, axis in enumerate("xyz")},
+                          **{f"h{axis}": extents[..., a].ravel() for a, axis in enumerate("xyz")}})
+    csv = tmp_path / "boxes.csv"
+    table.to_csv(csv, index=False)
+    lo, hi = (positions - extents).astype(np.float32), (positions + extents).astype(np.float32)
+    aabbs = write_aabbs(tmp_path / "boxes.aabbs", lo, hi, name="falling boxes", kind="Cubes")
+    scenes = [load_trajectory(p) for p in (npz, csv)]
+    from_broadmark = load_trajectory(aabbs)
+    assert from_broadmark.name == "falling boxes" and from_broadmark.meta["broadmark_objects"] == "Cubes"
+    for scene in scenes:
+        assert scene.shape == "boxes" and np.array_equal(scene.motion.extents, extents)
+        assert np.array_equal(scene.motion.positions, positions)
+    # Broadmark's float32 bounds come back exactly: centre +- half-extent is the recorded box.
+    record = from_broadmark.motion
+    assert np.array_equal(record.positions - record.extents, lo) and np.array_equal(record.positions + record.extents, hi)
+    from scenes.motion import simulate
+
+    a, b = simulate(scenes[0], frames), simulate(scenes[1], frames)
+    for f in range(frames):
+        assert np.array_equal(a.box_pairs[f], b.box_pairs[f])
+        assert np.array_equal(a.box_pairs[f], box_pairs(positions[f], extents[f]))
+
+
+@pytest.mark.parametrize("damage, words", [
+    (lambda raw: raw[:200], "shorter than the 304-byte header"),
+    (lambda raw: raw[:-8], "a truncated or foreign file"),
+    (lambda raw: raw[:264] + np.array([7], "<i4").tobytes() + raw[268:], "two zeros belong"),
+])
+def test_a_malformed_aabbs_file_is_one_line(tmp_path, damage, words):
+    positions, extents = rotating_boxes(dim=3)
+    good = write_aabbs(tmp_path / "good.aabbs", positions - extents, positions + extents)
+    bad = tmp_path / "bad.aabbs"
+    bad.write_bytes(damage(good.read_bytes()))
+    with pytest.raises(TrajectoryFileError, match=re.escape(words)) as err:
+        load_trajectory(bad)
+    assert "\n" not in str(err.value) and str(err.value).startswith(str(bad))
+
+
+def test_a_box_whose_max_is_below_its_min_is_refused(tmp_path):
+    positions, extents = rotating_boxes(dim=3)
+    lo, hi = positions - extents, positions + extents
+    lo[2, 5, 1] = hi[2, 5, 1] + 1
+    path = write_aabbs(tmp_path / "inverted.aabbs", lo, hi)
+    with pytest.raises(TrajectoryFileError, match="box 5 of frame 2 has a max below its min"):
+        load_trajectory(path)
+
+
+@pytest.mark.parametrize("arrays, words", [
+    ({"extents": -np.ones((6, 60, 2))}, "frame 0: extents row 0 is negative"),
+    ({"extents": np.ones((6, 60, 3))}, "extents must have shape (60, 2) or (6, 60, 2)"),
+    ({"extents": np.ones((60, 2)), "radii": np.ones(60)}, "unknown extents"),
+])
+def test_a_bad_box_npz_is_one_line(tmp_path, arrays, words):
+    positions, _ = rotating_boxes()
+    path = tmp_path / "bad.npz"
+    np.savez(path, positions=positions, **arrays)
+    with pytest.raises(TrajectoryFileError, match=re.escape(words)) as err:
+        load_trajectory(path)
+    assert "\n" not in str(err.value)
+
+
+def test_compare_measures_box_trajectories_and_names_the_backends_without_boxes(tmp_path, capsys):
+    positions, extents = rotating_boxes(frames=5, n=300)
+    static = np.zeros(300, dtype=bool)
+    static[:10] = True
+    positions[:, :10] = positions[0, :10]
+    extents[:, :10] = extents[0, :10]
+    npz = tmp_path / "rotating.npz"
+    np.savez(npz, positions=positions, extents=extents, static=static)
+    out = tmp_path / "out"
+    assert compare.main(["--trajectory", str(npz), "--quick", "--backends", "own.grid,own.sap,own.grid_incremental",
+                         "--out", str(out), "--check"]) == 0
+    printed = capsys.readouterr().out
+    assert "not run on boxes, they take circles and spheres only: own.grid_incremental" in printed
+    rows = pd.read_csv(out / "results.csv")
+    assert set(rows.backend) == {"own.grid", "own.sap"} and (rows.status == "ok").all()
+    assert (rows.missed == 0).all() and (rows.candidates == rows.true_pairs).all() and (rows["shape"] == "boxes").all()
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_a_scene_file_of_boxes_is_read_back_the_same_and_a_bad_one_is_one_line(tmp_path, dim):
+    from scenes.io import SceneFileError, load_scene, save_scene
+    from scenes.scene import Scene
+
+    rng = np.random.default_rng(dim)
+    scene = Scene(rng.uniform(0, 10, (6, dim)), None, rng.normal(0, 1, (6, dim)), box=(0.0,) * dim + (10.0,) * dim,
+                  extents=rng.uniform(0, 1, (6, dim)))
+    again = load_scene(save_scene(scene, tmp_path / "boxes.csv"))
+    assert again.shape == "boxes" and np.array_equal(again.extents, scene.extents)
+    assert np.array_equal(again.positions, scene.positions) and again.box == scene.box
+    (tmp_path / "bad.csv").write_text("x,y,hx,hy\n1,2,0.5,3\n1,2,-1,3\n")
+    with pytest.raises(SceneFileError, match="line 3: half-extent hx is negative"):
+        load_scene(tmp_path / "bad.csv")
