@@ -14,6 +14,7 @@ import sys
 from matplotlib.animation import FuncAnimation, PillowWriter
 
 import engines
+from interface.base import size_keyword
 from own.small import SmallScenes
 from scenes.motion import simulate
 
@@ -70,18 +71,25 @@ class Stepper:
         self.backend, self.traj = backend, traj
         if isinstance(backend, SmallScenes):  # drawing the structure is the point, however small the scene
             backend.small_scene_n = 0
-        self.backend.reset(traj.positions[0], traj.scene.radii, static=traj.scene.static, alive=traj.alive_at(0))
+        self.backend.reset(traj.positions[0], static=traj.scene.static, alive=traj.alive_at(0),
+                           **size_keyword(traj.sizes_at(0)))
 
     def draw(self, fig, f: int, label: str) -> dict[str, int]:
         traj = self.traj
-        self.backend.update(traj.positions[f], traj.alive_at(f))
+        extents = traj.extents_at(f)
+        if extents is None:
+            self.backend.update(traj.positions[f], traj.alive_at(f))
+        else:
+            self.backend.update(traj.positions[f], traj.alive_at(f), extents=extents)
         candidates = self.backend.pairs()
         must = traj.box_pairs[f] if self.backend.reports == "boxes" else traj.contacts[f]
         flat = traj.scene.dim == 2
         structure = self.backend.structure() if flat else {}
         shown = ("" if structure else " (structure not exposed by this backend)") if flat else \
             " (spheres projected on the x-y plane)"
-        counts = draw_frame(fig, traj.positions[f][:, :2], traj.scene.radii, structure, candidates, traj.contacts[f],
+        sizes = traj.sizes_at(f)
+        counts = draw_frame(fig, traj.positions[f][:, :2], sizes if sizes.ndim == 1 else sizes[:, :2], structure,
+                            candidates, traj.contacts[f],
                             must, f"{label}{shown}, frame {f}", alive=traj.alive_at(f), static=traj.scene.static)
         fig.axes[0].set_title(fig.axes[0].get_title() + f"\n{counts['candidates']} candidates, "
                               f"{counts['overlaps']} true overlaps found, {counts['missed']} missed", fontsize=9)

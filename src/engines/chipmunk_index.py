@@ -32,7 +32,7 @@ import numpy as np
 import pymunk._chipmunk
 from numba import types
 
-from interface.base import BroadPhase
+from interface.base import BroadPhase, per_axis
 
 from .chipmunk import HASH_SWEEPS, ChipmunkTree, HashCellGuard
 
@@ -148,11 +148,18 @@ class _ChipmunkIndex(BroadPhase):
         index.klass.remove(index, ffi.cast("void *", self._records.ctypes.data + i * RECORD_BYTES), i)
 
     def _write_boxes(self, positions: np.ndarray) -> None:
-        r = self.radii
-        self._records[:, 0] = positions[:, 0] - r
-        self._records[:, 1] = positions[:, 1] - r
-        self._records[:, 2] = positions[:, 0] + r
-        self._records[:, 3] = positions[:, 1] + r
+        """Each object's cpBB (l, b, r, t): its circle's box, or the box itself."""
+        h = per_axis(self.radii)
+        self._records[:, 0] = positions[:, 0] - h[:, 0]
+        self._records[:, 1] = positions[:, 1] - h[:, -1]
+        self._records[:, 2] = positions[:, 0] + h[:, 0]
+        self._records[:, 3] = positions[:, 1] + h[:, -1]
+
+    def _reshape(self, positions):
+        """Boxes took new extents: written into the records like a move (every query reindexes
+        each object from its record); the statics keep theirs (the interface checks)."""
+        self.radii = self._all_radii
+        self._update(positions)
 
     def _update(self, positions):
         self._write_boxes(positions)
@@ -215,6 +222,7 @@ class ChipmunkTreeIndex(_ChipmunkIndex):
 
     name = "chipmunk.bbtree_index"
     method = "tree"
+    shapes = ("balls", "boxes")  # a cpBB per object, directly
     limits = ChipmunkTree.limits  # the same fat boxes (chipmunk.py)
 
     def _new_index(self, positions, radii, static_index):
@@ -230,6 +238,7 @@ class ChipmunkHashIndex(HashCellGuard, _ChipmunkIndex):
 
     name = "chipmunk.hash_index"
     method = "hash"
+    shapes = ("balls", "boxes")
     defaults = {"dim": None, "count": None}
     sweeps = HASH_SWEEPS
 

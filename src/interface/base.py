@@ -131,8 +131,8 @@ class Limits:
         if far.max() <= self.reach:
             return None
         k = int(far.argmax())
-        return (f"object {k} reaches {beside(far[k], self.reach)} from the origin (coordinate plus half its size), beyond "
-                f"its limit of {self.reach:.3g}")
+        return (f"object {k} reaches {beside(far[k], self.reach)} from the origin (coordinate plus half its size), "
+                f"beyond its limit of {self.reach:.3g}")
 
     def crowd_problem(self, positions: np.ndarray) -> str | None:
         """More objects at one identical centre than `coincident`, or None (at reset: a sort)."""
@@ -193,7 +193,8 @@ def hash_cells_problem(positions: np.ndarray, radii: np.ndarray, cell: float, mo
     cells from the origin."""
     if not len(radii):
         return None
-    per_side = np.floor((positions + radii[:, None]) / cell) - np.floor((positions - radii[:, None]) / cell) + 1
+    halves = per_axis(radii)
+    per_side = np.floor((positions + halves) / cell) - np.floor((positions - halves) / cell) + 1
     flat_in_3d = dims == 3 and positions.shape[1] == 2
     cells = per_side.prod(axis=1) * (per_side.max(axis=1) if flat_in_3d else 1)
     if cells.max() > most:
@@ -287,7 +288,7 @@ class BroadPhase(ABC):
             raise RuntimeError(f"{self.name}: call reset(positions, radii) before update()")
         pos = check_positions(positions, self.objects, dims=(self.dim,))
         reshaped = extents is not None and self._reshaped(extents)
-        self._check_limits(pos, self._all_radii, moved=not reshaped, reset=reshaped)
+        self._check_limits(pos, self._all_radii, moved=not reshaped)  # new extents: every size limit
         changed = False
         if alive is not None:
             alive = check_mask(alive, (self.objects,), "alive")

@@ -80,6 +80,17 @@ def swept_circles(before: np.ndarray, after: np.ndarray, radii: np.ndarray) -> t
     return mid, radii + reach + pad
 
 
+def swept_boxes(before: np.ndarray, after: np.ndarray, sizes_before: np.ndarray,
+                sizes_after: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Boxes (centres, half-extents) that cover each object's box at both positions and both sizes
+    (a rotating body's box changes too), padded by a few ulps as swept_circles's. Computed in
+    halves, so that coordinates near the largest double do not overflow."""
+    lo = np.minimum(0.5 * before - 0.5 * sizes_before, 0.5 * after - 0.5 * sizes_after)
+    hi = np.maximum(0.5 * before + 0.5 * sizes_before, 0.5 * after + 0.5 * sizes_after)
+    mid, half = lo + hi, hi - lo
+    return mid, half + 4 * np.finfo(float).eps * (np.abs(mid) + half)
+
+
 def radius_of(radius, i):
     """Object i's radius: radius[i], or `radius` itself where it is one float. Our kernels take a
     scene whose radii are all equal as that float, and numba compiles them once more for it, with

@@ -26,7 +26,9 @@ import numba as nb
 import numpy as np
 from numba.extending import overload
 
-from .common import PairCollector, centre_extents, emit, radius_of
+from interface.base import size_keyword
+
+from .common import PairCollector, centre_extents, copy_size, emit, widest_half
 from .dimension import marker
 from .grid import (CellLayout, UniformGrid, above, cell_key, cell_keys, covered_cells, first_row, gather_centres,
                    grid_layout, key_space, key_strides, large_against_large, large_key, next_row, rows_in, small_limit)
@@ -88,7 +90,7 @@ def incremental_rebuild(positions, radii, layout, limit, state, head, cand, dim)
     # the lists: O(n + cells) where argsort took 0.4 of a 0.65 ms rebuild at n = 4096.
     head[:large + 2] = 0
     for i in range(n):
-        okey[i] = cell_key(positions, i, radii[i], limit, space, dim)
+        okey[i] = cell_key(positions, i, widest_half(radii, i, dim), limit, space, dim)
         head[okey[i] + 1] += 1
     for c in range(1, large + 2):
         head[c] += head[c - 1]
@@ -99,7 +101,7 @@ def incremental_rebuild(positions, radii, layout, limit, state, head, cand, dim)
     gather_centres(positions, perm, xy, dim)
     for a in range(n):
         rank[perm[a]] = a
-        sr[a] = radii[perm[a]]
+        copy_size(sr, a, radii, perm[a], dim)
     rkey[:] = okey[perm]
     # Ranks are in cell order now, and head[c] is where cell c's ranks end (head[c - 1] where
     # they start: every key is at least 1), so each object's candidates are runs of ranks: the
@@ -158,9 +160,9 @@ def add_neighbours(state, head, moved, movers, lo, hi, layout, cand, m, dim):
 def incremental_update(positions, radius, limit, layout, state, head, cand, m, movers, moved, max_movers, dim):
     """This frame's centres stored by rank; the ranks that changed cell moved between the lists,
     their candidates dropped and their new neighbours added. `radius`: the radii, or the one
-    radius of them all (common.radius_of). Returns (candidates, movers), or (-1, movers) when a
-    rebuild is due: too many movers, or one that starts or stops being large. A candidate count
-    past cand's rows also asks for a rebuild, into a bigger cand."""
+    radius of them all (common.radius_of), or the boxes' half-extents. Returns (candidates,
+    movers), or (-1, movers) when a rebuild is due: too many movers, or one that starts or stops
+    being large. A candidate count past cand's rows also asks for a rebuild, into a bigger cand."""
     perm, rank, xy, sr, rkey, nxt, prv, okey = unpack(state)
     n = perm.shape[0]
     space = key_space(layout, dim)
@@ -175,7 +177,7 @@ def incremental_update(positions, radius, limit, layout, state, head, cand, m, m
         a = rank[i]
         for axis in range(len(dim)):
             xy[a, axis] = positions[i, axis]
-        c = cell_key(positions, i, radius_of(radius, i), limit, space, dim)
+        c = cell_key(positions, i, widest_half(radius, i, dim), limit, space, dim)
         if c != okey[i]:  # a branch, not a branch-free append: 1 in 100 moves (1.4x faster, measured)
             movers[k, 0], movers[k, 1] = a, c
             k += 1
@@ -320,6 +322,7 @@ class IncrementalGrid(StaticsApart, CellLayout):
 
     name = "own.grid_incremental"
     dims = (2, 3)
+    shapes = ("balls", "boxes")
     defaults = {"p": None, "cell": None, "specialise": True, "candidates": "auto"}
 
     def __init__(self, **params):
@@ -352,7 +355,7 @@ class IncrementalGrid(StaticsApart, CellLayout):
             self._plain = UniformGrid(p=self.params["p"], cell=self.params["cell"],
                                       specialise=self.params["specialise"])
             self._plain.small_scene_n = -1  # a structure at every size, as this backend's (none: all static)
-        self._plain.reset(positions, self.radii)
+        self._plain.reset(positions, **size_keyword(self.radii))
         self._quiet = 0
 
     def _keep_candidates(self, positions, radii):
@@ -360,7 +363,7 @@ class IncrementalGrid(StaticsApart, CellLayout):
         n = self.n
         self._start_layout(radii)
         self._dim = marker(self.dim)
-        self._state = new_state(n, self.dim)
+        self._state = new_state(n, self.dim, self.shape == "boxes")
         self._specialise()
         self._head = np.empty(0, dtype=np.int64)  # first rank of each cell's list
         self._new_candidates(4 * n + 64)

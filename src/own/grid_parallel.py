@@ -20,7 +20,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .common import centre_extents, radius_of
+from .common import centre_extents, widest_half
 from .grid import cell_key, grid_layout, key_space, small_limit
 from .grid_incremental import IncrementalGrid, add_neighbours, has_large, head_length, head_offset, incremental_rebuild
 from .kept_lists import (CANDIDATE_RANK, LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT,
@@ -52,7 +52,7 @@ def _chunk_movers(positions, lo, hi, radius, limit, layout, rank, xy, okey, move
         a = rank[i]
         for axis in range(len(dim)):
             xy[a, axis] = positions[i, axis]
-        key = cell_key(positions, i, radius_of(radius, i), limit, space, dim)
+        key = cell_key(positions, i, widest_half(radius, i, dim), limit, space, dim)
         if key != okey[i]:
             movers[k, 0], movers[k, 1] = a, key
             k += 1

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .common import radius_of
+from .common import half_of
 
 # A frame with more objects changing cell than n / this rebuilds: past that, listing every
 # mover's neighbours and dropping their old candidates (a pass over all of them) costs more than
@@ -104,20 +104,21 @@ def drop_moved(cand, m, moved):
     return m
 
 
-def new_state(n: int, dim: int = 2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The arrays of the kernels' `state` (see unpack) for n objects in `dim` dimensions: three
-    arrays, not eight, since each array handed to a compiled call costs about 60 ns to unpack (a
-    few percent of a frame at n = 2048)."""
-    return np.empty((6, n), dtype=np.int64), np.empty((n, dim)), np.empty(n)
+def new_state(n: int, dim: int = 2, boxes: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The arrays of the kernels' `state` (see unpack) for n objects in `dim` dimensions, balls or
+    `boxes` (half-extents by rank, (n, dim)): three arrays, not eight, since each array handed to a
+    compiled call costs about 60 ns to unpack (a few percent of a frame at n = 2048)."""
+    return np.empty((6, n), dtype=np.int64), np.empty((n, dim)), np.empty((n, dim) if boxes else n)
 
 
 @nb.njit(cache=True, inline="always")
 def boxes_overlap(centres, sr, a, b, dim):
     """Whether the boxes of ranks a and b overlap (bounds x - r, x + r, as everywhere); `sr`, the
-    radii by rank or their one radius; `dim`, the dimension's marker (own/dimension.py)."""
-    r, s = radius_of(sr, a), radius_of(sr, b)
+    radii by rank or their one radius, or the boxes' half-extents by rank (common.half_of); `dim`,
+    the dimension's marker (own/dimension.py)."""
     hit = True
     for axis in range(len(dim)):
+        r, s = half_of(sr, a, axis), half_of(sr, b, axis)
         x, u = centres[a, axis], centres[b, axis]
         hit &= max(x - r, u - s) <= min(x + r, u + s)
     return hit

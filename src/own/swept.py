@@ -3,15 +3,18 @@
 A pair of fast movers can pass through each other between two frames without their boxes ever
 overlapping at a frame (tunneling). Enlarging every box by the frame's displacement hands such
 pairs to the narrow phase, which can then test them along their paths (continuous collision
-detection). The cost: more candidates, and a rebuild every frame since the radii change.
+detection). The cost: more candidates, and a rebuild every frame since the radii change. Boxes
+are swept over both frames' extents too (a rotating body's box changes as it moves).
 """
 
 from __future__ import annotations
 
-from interface.base import BroadPhase
+import numpy as np
+
+from interface.base import BroadPhase, size_keyword
 from interface.registry import backend_class
 
-from .common import swept_circles
+from .common import swept_boxes, swept_circles
 from .statics import StaticsApart
 
 
@@ -19,18 +22,31 @@ class _Swept(StaticsApart, BroadPhase):
     exact = False
     inner = ""
 
+    shapes = ("balls", "boxes")
+    _held_before: np.ndarray | bool | None = None  # the objects held at the last build (False: every one)
+
     def __init__(self, **params):
         self.defaults = backend_class(self.inner).defaults  # same knobs as the wrapped backend
         super().__init__(**params)
         self._backend = backend_class(self.inner)(**params)
 
     def _reset(self, positions, radii):
-        self._previous = positions.copy()
-        self._backend.reset(positions, radii)
+        held = self._alive_ids
+        if self._built and radii.ndim == 2 and self._held_before is not None and \
+                (np.array_equal(held, self._held_before) if held is not None else self._held_before is False):
+            self._update(positions)  # the same boxes with new extents (rotated): swept from last frame's
+            return
+        self._held_before = held if held is not None else False
+        self._previous, self._sizes_before = positions.copy(), radii
+        self._backend.reset(positions, **size_keyword(radii))
 
     def _update(self, positions):
-        self._backend.reset(*swept_circles(self._previous, positions, self.radii))
-        self._previous = positions.copy()
+        if self.radii.ndim == 2:  # boxes: each covers its box at both frames, at both frames' extents
+            centres, halves = swept_boxes(self._previous, positions, self._sizes_before, self.radii)
+            self._backend.reset(centres, extents=halves)
+        else:
+            self._backend.reset(*swept_circles(self._previous, positions, self.radii))
+        self._previous, self._sizes_before = positions.copy(), self.radii
 
     def _pairs(self):
         return self._backend.pairs()

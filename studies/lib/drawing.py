@@ -1,7 +1,8 @@
-"""Draw one frame: the circles, the backend's structure, candidate pairs, true overlaps, misses.
+"""Draw one frame: the circles (or boxes), the backend's structure, candidate pairs, true
+overlaps, misses.
 
-Every drawn layer is one matplotlib collection tagged with a gid ("circles", "cells", "nodes",
-"intervals", "candidates", "overlaps", "missed"), so what a picture shows can be counted.
+Every drawn layer is one matplotlib collection tagged with a gid ("circles" or "boxes", "cells",
+"nodes", "intervals", "candidates", "overlaps", "missed"), so what a picture shows can be counted.
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ import textwrap
 import warnings
 
 import numpy as np
-from matplotlib.collections import EllipseCollection, LineCollection
+from matplotlib.collections import EllipseCollection, LineCollection, PolyCollection
 from matplotlib.lines import Line2D
 
 from interface.pairs import keys
@@ -66,7 +67,8 @@ def draw_frame(fig, positions: np.ndarray, radii: np.ndarray, structure: dict, c
     """Draw into `fig` (cleared); returns how many elements each layer holds. Only the objects
     `alive` are drawn (all where None), the `static` ones in grey.
 
-    `overlaps`: pairs of truly overlapping circles (highlighted where found); `must_find`: the
+    `radii`: the circles' radii (n,), or the boxes' half-extents (n, 2), drawn as boxes.
+    `overlaps`: pairs of truly overlapping objects (highlighted where found); `must_find`: the
     pairs the backend promises (box overlaps or contacts); those absent from `candidates` are
     drawn in red as missed. A scene whose coordinates pass 1e100 is drawn in units of a power of
     ten, said on the axes: matplotlib cannot place ticks near the largest double.
@@ -86,12 +88,19 @@ def draw_frame(fig, positions: np.ndarray, radii: np.ndarray, structure: dict, c
     shown = np.ones(n, dtype=bool) if alive is None else alive
     fixed = np.zeros(n, dtype=bool) if static is None else static
     colours = np.where(fixed[shown], "0.55", "tab:blue")
-    circles = EllipseCollection(2 * radii[shown], 2 * radii[shown], np.zeros(int(shown.sum())), units="xy",
-                                offsets=positions[shown], offset_transform=ax.transData, facecolors="none",
-                                edgecolors=colours, linewidths=0.6, zorder=2)
-    circles.set_gid("circles")
-    ax.add_collection(circles)
-    counts = {"circles": int(shown.sum())}
+    kind = "circles" if radii.ndim == 1 else "boxes"
+    halves = radii[:, None] if radii.ndim == 1 else radii
+    if kind == "circles":
+        objects = EllipseCollection(2 * radii[shown], 2 * radii[shown], np.zeros(int(shown.sum())), units="xy",
+                                    offsets=positions[shown], offset_transform=ax.transData, facecolors="none",
+                                    edgecolors=colours, linewidths=0.6, zorder=2)
+    else:
+        corners = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]])
+        objects = PolyCollection(positions[shown, None, :] + corners[None] * halves[shown, None, :],
+                                 facecolors="none", edgecolors=colours, linewidths=0.6, zorder=2)
+    objects.set_gid(kind)
+    ax.add_collection(objects)
+    counts = {kind: int(shown.sum())}
     for layer in ("cells", "nodes"):
         if layer in structure:
             _add(ax, layer, _rect_outlines(structure[layer]), 1)
@@ -103,8 +112,8 @@ def draw_frame(fig, positions: np.ndarray, radii: np.ndarray, structure: dict, c
     _add(ax, "missed", _segments(positions, missed), 5)
     counts.update(candidates=len(candidates), overlaps=int(found.sum()), missed=len(missed))
     if shown.any():
-        lo = (positions[shown] - radii[shown, None]).min(axis=0)
-        hi = (positions[shown] + radii[shown, None]).max(axis=0)
+        lo = (positions[shown] - halves[shown]).min(axis=0)
+        hi = (positions[shown] + halves[shown]).max(axis=0)
         # Centre and half-span, computed in halves and capped below half the largest double, so
         # that the span stays a number (matplotlib needs one) even for a scene near that extreme.
         centre = 0.5 * lo + 0.5 * hi
@@ -126,7 +135,7 @@ def draw_frame(fig, positions: np.ndarray, radii: np.ndarray, structure: dict, c
         strip.set_ylim(-1, max(rows.max(initial=0) + 1, 1))
         strip.set_yticks([])
         strip.set_xlabel(f"intervals along the sweep axis ({'xy'[axis]}), packed into rows", fontsize=8)
-    legend(fig, counts, bool(fixed[shown].any()))
+    legend(fig, counts, bool(fixed[shown].any()), "s" if kind == "boxes" else "o")
     relayout(fig)
     return counts
 
@@ -135,11 +144,11 @@ LAYER_WORDS = {"cells": "grid cells", "nodes": "tree nodes", "intervals": "inter
                "candidates": "candidate pairs", "overlaps": "true overlaps found", "missed": "pairs missed"}
 
 
-def legend(fig, counts: dict[str, int], statics: bool) -> None:
-    """What each colour is, under the picture: the circles, and each layer drawn."""
-    handles = [Line2D([], [], ls="", marker="o", mfc="none", color="tab:blue", label="objects")]
+def legend(fig, counts: dict[str, int], statics: bool, marker: str = "o") -> None:
+    """What each colour is, under the picture: the objects (circles "o", boxes "s"), and each layer drawn."""
+    handles = [Line2D([], [], ls="", marker=marker, mfc="none", color="tab:blue", label="objects")]
     if statics:
-        handles.append(Line2D([], [], ls="", marker="o", mfc="none", color="0.55", label="static objects"))
+        handles.append(Line2D([], [], ls="", marker=marker, mfc="none", color="0.55", label="static objects"))
     for layer, words in LAYER_WORDS.items():
         if counts.get(layer):
             style = STYLE[layer]
@@ -162,6 +171,8 @@ def counted(fig) -> dict[str, int]:
             gid = c.get_gid()
             if gid == "circles":
                 out[gid] = len(c.get_offsets())
+            elif gid == "boxes":
+                out[gid] = len(c.get_paths())
             elif gid:
                 out[gid] = out.get(gid, 0) + len(c.get_segments())
     return out

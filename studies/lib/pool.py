@@ -241,7 +241,10 @@ def _local_client(jobs: int, dashboard: bool):
         import dask
         from distributed import Client, LocalCluster
 
-        dask.config.set({"distributed.scheduler.allowed-failures": 1})
+        # No statistical profiler in the worker: it samples every thread's stack 100 times a second
+        # in the very process that times the jobs, and its sampling (sys._current_frames) once
+        # crashed the process while a job's child was being reaped.
+        dask.config.set({"distributed.scheduler.allowed-failures": 1, "distributed.worker.profile.enabled": False})
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             # The jobs hold their thread for seconds by design: the event loop's warnings about it
