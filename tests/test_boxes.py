@@ -348,3 +348,15 @@ def test_show_draws_boxes_as_boxes(tmp_path, capsys):
     assert show.main(["--trajectory", str(npz), "--backends", "own.grid", "--out", str(tmp_path / "show")]) == 0
     printed = capsys.readouterr().out
     assert "40 boxes" in printed and "0 missed" in printed
+
+
+def test_the_readme_boxes_example_runs():
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    at = text.index('extents = rng.uniform(2, 8, (4000, 2))')
+    code = text[text.rindex("```python", 0, at) + len("```python"):text.index("```", at)]
+    scope: dict = {}
+    exec(code, scope)  # noqa: S102 - the README's own example
+    pairs, positions, static = scope["pairs"], scope["positions"], scope["static"]
+    assert as_set(pairs) == as_set(box_pairs(positions, scope["turned"], None, static))
