@@ -34,8 +34,8 @@ from interface.base import BroadPhase, per_axis, size_keyword
 from interface.checks import shown
 from interface.knobs import Knob, mean_diameter, sizes
 
-from .common import (PairCollector, centre_extents, copy_size, emit, half_of, halves, one_radius, radius_of, row_of,
-                     set_halves, widest_half, widest_halves)
+from .common import (PairCollector, cell_of, centre_extents, copy_size, emit, half_of, halves, one_radius, radius_of,
+                     row_of, set_halves, widest_half, widest_halves)
 from .compress import NATIVE, SLACK_ROWS, scan_compressed
 from .dimension import marker
 from .small import SmallScenes
@@ -70,13 +70,6 @@ PADDED = (0, 0, 0, 3)
 CELLS_ROOM = (0, 0, 16, 64)
 # A repair of last frame's slot order gives up past this many swaps per object and counting-sorts.
 MAX_SWAPS_PER_OBJECT = 8
-
-
-@nb.njit(cache=True, inline="always")
-def cell_of(v: float, origin: float, inv: float, last: float) -> int:
-    """Cell index of coordinate v along one axis, clamped to 0..last (monotone in v). Clamping
-    in floating point keeps it branch-free: branches here cost 2x in the build."""
-    return int(min(max((v - origin) * inv, 0.0), last))
 
 
 def key_space(layout, dim):

@@ -17,7 +17,7 @@ import math
 import numba as nb
 import numpy as np
 
-from .common import PairCollector, emit, half_of
+from .common import PairCollector, cell_of, emit, half_of
 from .dimension import marker
 
 # Cells get larger (x 1.5) until the statics' entries (one per cell each covers) are at most this
@@ -25,12 +25,6 @@ from .dimension import marker
 # cells of a mover's size would otherwise be filed thousands of times.
 ENTRIES_PER_STATIC = 64
 CELLS_PER_ENTRY = 4
-
-
-@nb.njit(cache=True, inline="always")
-def _cell_of(v, origin, inv, last):
-    """Cell index of coordinate v along one axis, clamped to 0..last (monotone in v)."""
-    return int(min(max((v - origin) * inv, 0.0), last))
 
 
 @nb.njit(cache=True, inline="always")
@@ -59,8 +53,8 @@ def _covered(positions, sizes, k, origin, inv, last, lo, hi, at, d):
     """Into lo, hi (and `at`, set to lo): the cells the box of row k covers on each axis."""
     for a in range(d):
         h = half_of(sizes, k, a)
-        lo[a] = _cell_of(positions[k, a] - h, origin[a], inv[a], last[a])
-        hi[a] = _cell_of(positions[k, a] + h, origin[a], inv[a], last[a])
+        lo[a] = cell_of(positions[k, a] - h, origin[a], inv[a], last[a])
+        hi[a] = cell_of(positions[k, a] + h, origin[a], inv[a], last[a])
         at[a] = lo[a]
 
 
@@ -111,8 +105,8 @@ def against_static_boxes(q_ids, q_centres, q_sizes, q_end, s_objects, s_position
         if outside:
             continue
         for a in range(d):
-            lo[a] = _cell_of(qlo[a], origin[a], inv[a], last[a])
-            hi[a] = _cell_of(qhi[a], origin[a], inv[a], last[a])
+            lo[a] = cell_of(qlo[a], origin[a], inv[a], last[a])
+            hi[a] = cell_of(qhi[a], origin[a], inv[a], last[a])
             at[a] = lo[a]
         i = q_ids[q]
         while True:
@@ -125,7 +119,7 @@ def against_static_boxes(q_ids, q_centres, q_sizes, q_end, s_objects, s_position
                     h = s_sizes[k, a]
                     slo, shi = s_positions[k, a] - h, s_positions[k, a] + h
                     meets &= (slo <= qhi[a]) & (qlo[a] <= shi)
-                    here &= _cell_of(max(slo, qlo[a]), origin[a], inv[a], last[a]) == at[a]
+                    here &= cell_of(max(slo, qlo[a]), origin[a], inv[a], last[a]) == at[a]
                 if meets and here:
                     emit(buf, count, i, s_objects[k])
                     count += 1
