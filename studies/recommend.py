@@ -30,7 +30,7 @@ from .lib.output import Output, read_meta, write_json
 from .lib.pool import Pool
 from .lib.results import RowWriter, stored_runs
 from .lib.runner import Runner
-from .lib.traits import CLUMPED, MIXED_SPREAD, Traits, measure_traits
+from .lib.traits import CLUMPED, ELONGATED, MIXED_SPREAD, Traits, measure_traits
 from .lib.trials import Trial, warm_up
 from .lib.tuning import tunable, tune_backend
 
@@ -187,6 +187,16 @@ def nothing_finished(entries: list[Entry]) -> str:
     return text
 
 
+# What lets each kind of structure take long and elongated boxes, said where a scene has them.
+BOX_REASONS = {
+    "grid": "long boxes go to a bucket of their own and static walls are filed in every cell they cover, so the "
+            "cells stay sized by the small boxes",
+    "hash": "long boxes cover cells of their own in the hash, so the cells stay sized by the small boxes",
+    "sweep": "the sweep runs along the axis the boxes spread on, and long boxes are swept once each",
+    "tree": "a tree splits by extent: long boxes sit high in it and small ones low",
+}
+
+
 def why(win: Entry, runner: Entry | None, traits: Traits) -> str:
     """The scene traits that favour the winner's kind of structure, as measured here."""
     method = engines.backend_class(win.backend).method if win.backend in engines.available() else ""
@@ -201,6 +211,9 @@ def why(win: Entry, runner: Entry | None, traits: Traits) -> str:
         reasons.append("a tree adapts to the mixed sizes and clumps"
                        if traits.radius_spread >= MIXED_SPREAD or traits.dispersion >= CLUMPED
                        else "a tree needs no size parameter")
+    if traits.shape == "boxes" and (traits.long_share > 0 or traits.aspect >= ELONGATED):
+        reasons.append(BOX_REASONS.get(method, "it takes the boxes as they are") + " ("
+                       + ", ".join(traits.box_words()) + ")")
     recorded = traits.recorded_words()
     if recorded:
         reasons.append("measured on this recorded motion, with " + ", ".join(recorded)

@@ -1,12 +1,13 @@
 """`python -m studies.scenes`: every backend on every scene family, essay's motion and recorded.
 
 The essay's motion (free flight at one speed) beside the families a real project has, recorded
-with pymunk (scenes/families.py: pile, rain, tumbler, smash, level, drum), at each n of `--sizes`.
+with pymunk (scenes/families.py: pile, rain, tumbler, smash, level, drum; boxes: pyramid, walls,
+debris), at each n of `--sizes`; the backends that take circles and spheres only skip the box families.
 Backends are ranked on update + pairs (the broad phase itself); the report says per family which
 of our structured backends falls over 3x behind our fastest, how our fastest stands against the
 fastest engine, and where the ranking differs from the essay's motion. Writes results.csv,
 meta.json, scenes.csv and SCENES.md (docs/ for a full run). `--dim 3`: the same over spheres, with
-the families recorded with Bullet (pile, rain, tumbler; the report in docs/3d/).
+the families recorded with Bullet (pile, rain, tumbler; boxes: brick_wall, beams; the report in docs/3d/).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import pandas as pd
 import engines
 from scenes import FAMILIES
 from scenes.costs import size_problem
-from scenes.families import families_in
+from scenes.families import SCENE_FAMILIES, families_in
 from scenes.generate import at_essay_density
 
 from .lib.cli import CliError, Parser, command_line, in_dimension, matched_backends, run_cli, warn_unavailable
@@ -59,17 +60,28 @@ def parse(argv: list[str] | None):
     if unknown or not args.family_list:
         raise CliError(f"--families: unknown {', '.join(unknown) or 'none given'} in {dim_of(args)}D; known: "
                        f"{', '.join(known)}")
-    try:
-        args.size_list = [int(v) for v in args.sizes.split(",")]
-    except ValueError:
-        raise CliError(f"--sizes must be a comma-separated list of integers, got {args.sizes!r}") from None
-    if min(args.size_list) < 2:
-        raise CliError("--sizes: every n must be at least 2")
+    args.size_list = size_list(args.sizes)
     for n in args.size_list:  # before --out is touched: a finished run's rows stay as they are
         problem = size_problem(n, args.frames + 1, dim=dim_of(args))
         if problem:
             raise CliError(f"--sizes: {problem}")
     return args
+
+
+def size_list(sizes: str) -> list[int]:
+    """--sizes as a list of object counts, or a CliError naming the problem."""
+    try:
+        counts = [int(v) for v in sizes.split(",")]
+    except ValueError:
+        raise CliError(f"--sizes must be a comma-separated list of integers, got {sizes!r}") from None
+    if min(counts) < 2:
+        raise CliError("--sizes: every n must be at least 2")
+    return counts
+
+
+def family_shape(family: str) -> str:
+    """"boxes" for a family of boxes, "balls" for the essay's motion and the circle families."""
+    return SCENE_FAMILIES[family].shape if family in SCENE_FAMILIES else "balls"
 
 
 def known_families(dim: int) -> tuple[str, ...]:
@@ -95,12 +107,16 @@ def main(argv: list[str] | None = None) -> int:
                  frames=args.frames, repeats=args.repeat, dim=dim,
                  unavailable=unavailable, commands=commands)
         jobs = []
+        boxes = [f for f in args.family_list if family_shape(f) == "boxes"]
+        if boxes:  # the backends without boxes are named once, and run on the other families
+            print(f"on {', '.join(boxes)}: ", end="")
+            box_runnable = in_dimension(runnable, dim, "boxes")
         for family in args.family_list:
             for n in args.size_list:
                 scene = at_essay_density(family, n, dim=dim)
                 jobs += [Job(backend, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout,
                              memory_mb=args.memory, scene=scene, frames=args.frames, tag={"label": family})
-                         for backend in runnable]
+                         for backend in (box_runnable if family in boxes else runnable)]
         with runner:
             runner.run_all(jobs, desc="scene families x backends")
         writer.finish()

@@ -31,8 +31,8 @@ from own.sap import SPARSE_PAIRS_PER_OBJECT
 from own.skin import GROW_MARGIN, SHRINK_GAIN
 from own.tree import REFIT_DRIFT
 from own.verlet import DEFAULT_SKIN_DIAMETERS, LARGEST_SKIN_DIAMETERS, SKIN_FACTORS, TRIAL_FRAMES
-from scenes import FAMILIES as RECORDED_FAMILIES
 from scenes import Scene, generate
+from scenes.families import families_in
 
 from .lib.cli import CliError, Parser, command_line, in_dimension, matched_backends, run_cli, warn_unavailable
 from .lib.figures import new_figure, save
@@ -54,7 +54,7 @@ FAMILIES: dict[str, dict[str, Any]] = {
     "clusters r=10": {"dist": "clusters", "radius": 10.0},
     "mixed r=1..100": {"dist": "uniform", "radii": (1.0, 100.0)},
     # Recorded with pymunk (scenes/families.py), radii 4 to 8.
-    **{f"{family} r=4..8": {"dist": family} for family in RECORDED_FAMILIES},
+    **{f"{family} r=4..8": {"dist": family} for family in families_in(2)},
 }
 FAMILY_SIZES = (1024, 8192)
 # --families --quick: one scene of each kind (equal radii, mixed radii, resting contact, statics)

@@ -25,6 +25,7 @@ from studies import compare
 
 BOX_BACKENDS = [n for n in engines.available() if "boxes" in engines.backend_class(n).shapes]
 BALLS_ONLY = [n for n in engines.available() if n not in BOX_BACKENDS]
+ENGINES_WITH_BOXES = [n for n in BOX_BACKENDS if not engines.of_kind(n, "own")]
 OWN_EXACT_BOXES = [n for n in BOX_BACKENDS if engines.of_kind(n, "own") and engines.backend_class(n).exact]
 
 
@@ -32,22 +33,65 @@ def as_set(pairs: np.ndarray) -> set[tuple[int, int]]:
     return set(map(tuple, np.asarray(pairs).tolist()))
 
 
+def touching_exactly(positions, extents) -> bool:
+    """Some overlapping pair of boxes only touches: on an axis one's edge is the other's edge."""
+    pairs = box_pairs(positions, extents)
+    lo, hi = positions - extents, positions + extents
+    i, j = pairs[:, 0], pairs[:, 1]
+    return bool(((lo[j] == hi[i]) | (lo[i] == hi[j])).any())
+
+
+def zero_width(positions, extents) -> bool:
+    """Some box has no width on an axis (a segment, a point)."""
+    return bool((extents == 0).any())
+
+
+def float32_tight(positions, extents) -> bool:
+    """Some pair overlaps by less than float32 resolves at its coordinates, or a value is beyond
+    float32's range: an engine that stores poses in float32 may lose it."""
+    if not len(positions):
+        return False
+    if max(np.abs(positions).max(), extents.max()) > np.finfo(np.float32).max / 4:
+        return True
+    pairs = box_pairs(positions, extents)
+    i, j = pairs[:, 0], pairs[:, 1]
+    slack = (extents[i] + extents[j] - np.abs(positions[j] - positions[i])).min(axis=1)
+    scale = np.maximum(np.abs(positions[i]).max(axis=1), np.abs(positions[j]).max(axis=1)) + extents.max() + 1e-30
+    return bool((slack <= 16 * float(np.finfo(np.float32).eps) * scale).any())
+
+
+# Engine -> box scenes it mishandles, each shown by test_an_engine_misses_boxes_where_its_limits_say.
+FLOAT32_ENGINES = ["physx.sap", "physx.mbp", "physx.pabp", "box2d.v2", "box2d.v3", "rapier.bvh"]
+BOX_LIMITATIONS = {**{name: [float32_tight] for name in FLOAT32_ENGINES},
+                   "bullet.dbvt": [touching_exactly, zero_width], "bullet.simple": [touching_exactly, zero_width],
+                   "coal.hash": [touching_exactly], "coal.interval": [touching_exactly],
+                   "mujoco.sap": [touching_exactly],
+                   **{name: [touching_exactly, float32_tight] for name in ["physx.sap", "physx.mbp", "physx.pabp"]}}
+# Engines that miss box pairs on ordinary scenes: out of the never-miss tests, their misses pinned below.
+UNRELIABLE_ON_BOXES = {"coal.sap"}
+
+
 def check_boxes(name: str, positions, extents, static=None, alive=None) -> None:
     """The backend's pairs on these boxes against the reference: no miss, no pair twice, exactly
-    the box overlaps for an exact backend."""
+    the box overlaps for an exact backend (outside the known limits of an engine)."""
+    assume(not any(applies(positions, extents) for applies in BOX_LIMITATIONS.get(name, [])))
     backend = engines.create(name)
     try:
         backend.reset(positions, extents=extents, static=static, alive=alive)
     except ValueError as refused:  # an engine's limits (say, a hash's cells per box): refused in one line
         assert not engines.of_kind(name, "own") and "\n" not in str(refused), refused
+        backend.close()
         assume(False)
-    got = backend.pairs()
-    expected = as_set(box_pairs(positions, extents, alive, static))
-    assert len(as_set(got)) == len(got), f"{name}: a pair reported twice"
-    assert expected <= as_set(got), f"{name}: missed {sorted(expected - as_set(got))[:5]}"
-    if backend.exact:
-        assert as_set(got) == expected
-    backend.validate()
+    try:
+        got = backend.pairs()
+        expected = as_set(box_pairs(positions, extents, alive, static))
+        assert len(as_set(got)) == len(got), f"{name}: a pair reported twice"
+        assert expected <= as_set(got), f"{name}: missed {sorted(expected - as_set(got))[:5]}"
+        if backend.exact:
+            assert as_set(got) == expected
+        backend.validate()
+    finally:
+        backend.close()
 
 
 def test_the_backends_that_take_boxes_are_registered():
@@ -55,6 +99,49 @@ def test_the_backends_that_take_boxes_are_registered():
             "own.verlet"} <= set(OWN_EXACT_BOXES)
     assert {"own.grid_incremental", "own.grid_parallel"} <= set(OWN_EXACT_BOXES)
     assert {"chipmunk.bbtree_index", "chipmunk.hash_index", "own.grid_swept", "own.sap_swept"} <= set(BOX_BACKENDS)
+
+
+def test_every_engine_of_the_issue_takes_boxes_natively_and_the_cutoff_libraries_refuse_them():
+    """The physics engines and the box libraries take boxes; what takes points with a cutoff
+    (the neighbour-list libraries, Warp's hash grid, scipy's k-d tree) does not."""
+    engines_with_boxes = {n for n in engines.names() if "boxes" in engines.backend_class(n).shapes}
+    for family in ["chipmunk", "box2d", "bullet", "physx", "rapier", "mujoco", "fcl", "coal", "shapely", "cgal"]:
+        members = [n for n in engines.names() if n.startswith(family + ".")]
+        assert members and set(members) - {"chipmunk.sweep1d"} <= engines_with_boxes, family
+    for family in ["mdanalysis", "freud", "matscipy", "vesin", "sklearn", "warp", "scipy"]:
+        assert not any(n.startswith(family + ".") for n in engines_with_boxes), family
+
+
+def lattice_of_touching_boxes(seed: int, dim: int, n: int = 120):
+    """Unit boxes on a lattice of unit steps: neighbours share faces, edges and corners exactly."""
+    rng = np.random.default_rng(seed)
+    return rng.integers(0, 12, (n, dim)).astype(np.float64), np.full((n, dim), 0.5)
+
+
+# (engine, scene, what it shows): each limit of BOX_LIMITATIONS and UNRELIABLE_ON_BOXES, missed here.
+CORNER = (np.array([[0.0, 0.0], [1.0, 1.0]]), np.full((2, 2), 0.5))
+SIDE_BY_SIDE = (np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), np.full((2, 3), 0.5))
+CORNER_3D = (np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]), np.full((2, 3), 0.5))
+FLAT_INSIDE = (np.array([[0.0, 0.0], [1.5, -2.3]]), np.array([[0.0, 3.0], [11.4, 6.8]]))
+BOX_EVIDENCE = [("bullet.dbvt", CORNER), ("bullet.simple", CORNER), ("bullet.dbvt", FLAT_INSIDE),
+                ("bullet.simple", FLAT_INSIDE), ("coal.interval", SIDE_BY_SIDE), ("coal.sap", SIDE_BY_SIDE),
+                ("mujoco.sap", CORNER_3D), ("coal.hash", lattice_of_touching_boxes(0, 2)),
+                *[(name, lattice_of_touching_boxes(7, 3)) for name in ["physx.sap", "physx.mbp", "physx.pabp"]]]
+
+
+@pytest.mark.parametrize("name, scene", BOX_EVIDENCE, ids=lambda v: v if isinstance(v, str) else "")
+def test_an_engine_misses_boxes_where_its_limits_say(name, scene):
+    """Each engine's box limits are real: on this scene it misses a pair (were it fixed, this fails
+    and the limit goes); the studies report such misses, they never hide them."""
+    if name not in engines.available():
+        pytest.skip(f"{name} is not available here")
+    positions, extents = scene
+    backend = engines.create(name)
+    backend.reset(positions, extents=extents)
+    missed = as_set(box_pairs(positions, extents)) - as_set(backend.pairs())
+    backend.close()
+    assert missed
+    assert name in UNRELIABLE_ON_BOXES or any(applies(positions, extents) for applies in BOX_LIMITATIONS[name])
 
 
 @pytest.mark.parametrize("name", BALLS_ONLY)
@@ -99,6 +186,20 @@ def test_a_static_box_that_changes_its_extents_is_refused():
         grid.update(np.zeros((3, 2)), extents=2 * np.ones((3, 2)))
 
 
+@pytest.mark.parametrize("name", ["own.grid", "own.sap", "chipmunk.bbtree"])
+def test_extents_changed_in_place_and_handed_back_are_a_change(name):
+    """A caller that grows its own array of extents and hands the same array to update: the
+    backend kept a copy, so it sees the change (it compared the array with itself before)."""
+    positions = np.array([[0.0, 0.0], [10.0, 0.0]])
+    extents = np.ones((2, 2))
+    backend = engines.create(name)
+    backend.reset(positions, extents=extents)
+    assert len(backend.pairs()) == 0
+    extents[0, 0] = 9.5
+    backend.update(positions, extents=extents)
+    assert backend.pairs().tolist() == [[0, 1]]
+
+
 def test_the_narrow_phase_of_boxes_is_their_overlap():
     rng = np.random.default_rng(4)
     positions, extents = rng.uniform(0, 50, (300, 2)), rng.uniform(0, 3, (300, 2))
@@ -118,11 +219,10 @@ def test_the_reference_past_brute_force_is_exact_on_boxes(dim):
     assert as_set(grid_box_pairs(positions, extents)) == as_set(brute_pairs(positions, extents))
 
 
-@pytest.mark.parametrize("name", BOX_BACKENDS)
-@pytest.mark.parametrize("dim", [2, 3])
-@settings(max_examples=40, deadline=None)
-@given(scene=st.data())
-def test_a_box_backend_never_misses_on_random_and_adversarial_boxes(name, dim, scene):
+RELIABLE_ON_BOXES = [n for n in BOX_BACKENDS if n not in UNRELIABLE_ON_BOXES]
+
+
+def never_misses_on_random_and_adversarial_boxes(name, dim, scene):
     if dim not in engines.backend_class(name).dims:
         pytest.skip(f"{name} works in 2D only")
     positions, extents = scene.draw(box_scenes(dim=dim))
@@ -130,6 +230,23 @@ def test_a_box_backend_never_misses_on_random_and_adversarial_boxes(name, dim, s
     check_boxes(name, positions, extents)
     check_boxes(name, positions, extents, static=rng.random(len(positions)) < 0.3,
                 alive=rng.random(len(positions)) < 0.8)
+
+
+@pytest.mark.parametrize("name", [n for n in RELIABLE_ON_BOXES if n not in ENGINES_WITH_BOXES])
+@pytest.mark.parametrize("dim", [2, 3])
+@settings(max_examples=40, deadline=None)
+@given(scene=st.data())
+def test_a_box_backend_never_misses_on_random_and_adversarial_boxes(name, dim, scene):
+    never_misses_on_random_and_adversarial_boxes(name, dim, scene)
+
+
+# Engines build a world per example (PhysX a stage: 0.2 s): fewer examples, the same strategy.
+@pytest.mark.parametrize("name", [n for n in RELIABLE_ON_BOXES if n in ENGINES_WITH_BOXES])
+@pytest.mark.parametrize("dim", [2, 3])
+@settings(max_examples=15, deadline=None)
+@given(scene=st.data())
+def test_an_engine_never_misses_on_random_and_adversarial_boxes(name, dim, scene):
+    never_misses_on_random_and_adversarial_boxes(name, dim, scene)
 
 
 # The settings that take our backends down their other paths, besides every box backend as it comes.
@@ -140,7 +257,7 @@ OTHER_PATHS = [("own.grid_parallel", {"parallel_from": 0}),
                ("own.quadtree", {"coherent": False}), ("own.verlet", {"skin": 0})]
 
 
-@pytest.mark.parametrize("name, params", [(n, {}) for n in BOX_BACKENDS] + OTHER_PATHS)
+@pytest.mark.parametrize("name, params", [(n, {}) for n in RELIABLE_ON_BOXES] + OTHER_PATHS)
 @pytest.mark.parametrize("dim", [2, 3])
 def test_a_box_backend_follows_boxes_that_move_rotate_spawn_and_go(name, params, dim):
     """Frames of movers whose extents change every frame (a rotating body's box), among static
@@ -172,6 +289,37 @@ def test_a_box_backend_follows_boxes_that_move_rotate_spawn_and_go(name, params,
         assert as_set(got) == expected if backend.exact else expected <= as_set(got), f"frame {frame}"
         assert len(as_set(got)) == len(got)
     backend.validate()
+
+
+RESIZING = [n for n in OWN_EXACT_BOXES if engines.backend_class(n).resizes]
+
+
+@pytest.mark.parametrize("name", RESIZING)
+@pytest.mark.parametrize("dim", [2, 3])
+def test_boxes_that_turn_a_little_are_kept_within_the_skin_and_stay_exact(name, dim):
+    """A structure kept with a skin takes new extents like a move (a side that grew moved out):
+    boxes turning a little every frame, as a settling stack's do, are not built anew each frame,
+    and every frame stays exact."""
+    assert {"own.verlet", "own.bvh", "own.quadtree"} <= set(RESIZING)
+    rng = np.random.default_rng(dim)
+    n = 600
+    positions = rng.uniform(0, 200, (n, dim))
+    extents = rng.uniform(1, 4, (n, dim))
+    static = np.arange(n) < 40
+    backend = engines.create(name)
+    backend.reset(positions, extents=extents, static=static)
+    resets, reset = [], backend._reset
+    backend._reset = lambda *args: (resets.append(1), reset(*args))  # a build from scratch
+    frames = 12
+    for _ in range(frames):
+        positions = positions.copy()
+        positions[~static] += rng.normal(0, 0.01, (n - 40, dim))
+        extents = extents.copy()
+        extents[~static] *= rng.uniform(0.995, 1.005, (n - 40, dim))
+        backend.update(positions, extents=extents)
+        assert as_set(backend.pairs()) == as_set(box_pairs(positions, extents, None, static))
+        backend.validate()
+    assert not resets, "built from scratch for new extents"
 
 
 def walls_scene(seed: int = 0):

@@ -238,8 +238,8 @@ def test_engine_reports_touching_boxes_or_circles(name):
 
 # --- spheres: every 3D engine in three dimensions ----------------------------------------
 
-# The engines that are 2D (Chipmunk, Box2D); every other engine drives spheres natively.
-PLANAR_FAMILIES = {"chipmunk", "box2d"}
+# The engines that are 2D (Chipmunk, Box2D, GEOS's tree); every other engine drives spheres natively.
+PLANAR_FAMILIES = {"chipmunk", "box2d", "shapely"}
 SPHERE_ENGINES = [n for n in RELIABLE if n.split(".")[0] not in PLANAR_FAMILIES]
 
 

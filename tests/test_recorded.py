@@ -11,8 +11,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from scenes import FAMILIES, generate
-from scenes.families import FAMILIES_3D, TRAITS, FamilyMotion, cache_dir
+from scenes import generate
+from scenes.families import TRAITS, FamilyMotion, cache_dir, families_in
 from scenes.motion import simulate
 from scenes.recorded import TrajectoryFileError, load_trajectory, save_trajectory
 from studies import compare, recommend
@@ -120,7 +120,10 @@ def test_a_file_that_is_not_a_trajectory_is_refused(tmp_path):
             load_trajectory(tmp_path / name)
 
 
-@pytest.mark.parametrize("family", FAMILIES)
+SPHERE_FAMILIES = families_in(3, "balls")
+
+
+@pytest.mark.parametrize("family", families_in(2, "balls"))
 def test_each_family_is_recorded_once_and_read_back_the_same(family):
     scene = generate(family, 300, seed=5)
     first = simulate(scene, 6)
@@ -146,7 +149,7 @@ def test_each_family_is_recorded_once_and_read_back_the_same(family):
         assert (np.hypot(first.positions[..., 0], first.positions[..., 1]) < scene.box[2]).all()
 
 
-@pytest.mark.parametrize("family", FAMILIES_3D)
+@pytest.mark.parametrize("family", SPHERE_FAMILIES)
 def test_each_sphere_family_is_recorded_with_bullet_and_keeps_its_trait(family):
     scene = generate(family, 300, seed=5, dim=3)
     first = simulate(scene, 8)
@@ -173,7 +176,7 @@ def test_each_sphere_family_is_recorded_with_bullet_and_keeps_its_trait(family):
 
 
 def test_the_circle_only_families_are_refused_over_spheres():
-    for family in set(FAMILIES) - set(FAMILIES_3D):
+    for family in set(families_in(2, "balls")) - set(SPHERE_FAMILIES):
         with pytest.raises(ValueError, match=f"the {family} family is a scene of circles"):
             generate(family, 100, dim=3)
 
@@ -227,9 +230,9 @@ def test_the_scenes_study_over_spheres_takes_the_families_recorded_with_bullet(t
     assert scenes_study.main(["--dim", "3", "--sizes", "300", "--backends", "own.grid,own.bvh,bullet.dbvt,box2d.v3",
                               "--frames", "2", "--repeat", "1", "--out", str(out), "--report-dir", str(out)]) == 0
     meta = json.loads((out / "meta.json").read_text())
-    assert meta["families"] == ["uniform", *FAMILIES_3D] and meta["dim"] == 3
+    assert meta["families"] == ["uniform", *families_in(3)] and meta["dim"] == 3
     table = pd.read_csv(out / "scenes.csv")
-    assert set(table.family) == {"uniform", *FAMILIES_3D}
+    assert set(table.family) == {"uniform", *families_in(3)}
     md = (out / "SCENES.md").read_text()
     assert md.startswith("# Scene families: the essay's motion and recorded scenes (spheres)") and "pybullet" in md
     rows = pd.read_csv(out / "results.csv")

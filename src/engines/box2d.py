@@ -7,7 +7,9 @@ update; `world.contacts` is then the set of pairs whose fat boxes overlap: its b
 output, reported as "boxes". Version 3.1 (`box2d.v3`): bodies moved in one batch call
 (`Bodies.set_transforms`), and the pairs kept from the contact begin and end touch events of
 each step: narrow-phase contacts, reported as "contacts" (sensors in v3 do not see each other).
-Box2D keeps positions in float32. Both take statics and spawning natively: static objects are
+Boxes are box polygons of their half-extents (2.3: sensor fixtures of density 0, whose fat boxes
+need no area; 3.1: polygon shapes, whose extents a rotating body's box changes in place). Box2D
+keeps positions in float32. Both take statics and spawning natively: static objects are
 static bodies (never moved, never paired with each other; v3 keeps them in a tree of their own),
 and an object that appears or goes is a body created or destroyed (2.3) or enabled or disabled
 (3.1), which inserts or removes its proxies in the broad phase.
@@ -35,6 +37,7 @@ class Box2DV2(BroadPhase):
     exact = False
     reports = "boxes"
     lifecycle = "native"
+    shapes = ("balls", "boxes")
     # Objects at one point: 500 took 4 s, 1000 took 48 s (a contact for each of their 499,500
     # pairs), 2000 gave no answer in 180 s.
     limits = Limits(coordinate=FLOAT32_MAX, radius=FLOAT32_MAX, coincident=500,
@@ -54,7 +57,11 @@ class Box2DV2(BroadPhase):
         """A static body for a static object (never moved, never paired with another static)."""
         make = self._world.CreateStaticBody if self._static[i] else self._world.CreateDynamicBody
         body = make(position=(float(xy[0]), float(xy[1])))
-        body.CreateCircleFixture(radius=float(self.radii[i]), isSensor=True, density=1.0).userData = i
+        if self.shape == "boxes":  # density 0: no mass computed, so a box of zero width is allowed
+            fixture = body.CreatePolygonFixture(box=tuple(self.radii[i].tolist()), isSensor=True, density=0.0)
+        else:
+            fixture = body.CreateCircleFixture(radius=float(self.radii[i]), isSensor=True, density=1.0)
+        fixture.userData = i
         self._bodies[i] = body
 
     def _find_movers(self) -> None:
@@ -95,6 +102,7 @@ class Box2DV3(BroadPhase):
     exact = False
     reports = "contacts"
     lifecycle = "native"
+    shapes = ("balls", "boxes")
 
     def _reset(self, positions, radii):
         self._world = pyb2d3.World(gravity=(0.0, 0.0))
@@ -105,11 +113,17 @@ class Box2DV3(BroadPhase):
         alive = self.alive if self.alive is not None else np.ones(self.n, dtype=bool)
         self._moving = np.flatnonzero(~static)
         self._handles = {}
+        self._shapes = []  # each object's shape, whose polygon a rotating box changes
         for i, ((x, y), r) in enumerate(zip(positions.tolist(), radii.tolist())):
             body = (self._world.create_static_body if static[i] else self._world.create_dynamic_body)(position=(x, y))
-            circle = pyb2d3.Circle()
-            circle.radius = r
-            body.create_circle_shape(shape, circle).user_data = i
+            if self.shape == "boxes":
+                made = body.create_polygon_shape(shape, pyb2d3.box(*r))
+            else:
+                circle = pyb2d3.Circle()
+                circle.radius = r
+                made = body.create_circle_shape(shape, circle)
+            made.user_data = i
+            self._shapes.append(made)
             if not static[i]:
                 self._bodies.append(body.id)
             if not alive[i]:
@@ -131,6 +145,14 @@ class Box2DV3(BroadPhase):
         for i in self.spawned.tolist():  # a proxy inserted where the object now is
             self._handles[i].enabled = True
         self._bodies.set_linear_velocities(self._still)  # the solver pushed last frame's contacts apart
+
+    def _reshape(self, positions):
+        """Boxes took new extents (bodies rotated): each changed shape gets its new box polygon."""
+        changed = np.flatnonzero((self._all_radii != self.radii).any(axis=1))
+        self.radii = self._all_radii
+        for i, (hx, hy) in zip(changed.tolist(), self.radii[changed].tolist()):
+            self._shapes[i].cast().polygon = pyb2d3.box(hx, hy)
+        self._update(positions)
 
     def _pairs(self):
         self._world.step(FRAME_DT, 1)
@@ -165,6 +187,6 @@ class Box2DV3(BroadPhase):
     def close(self):
         world = getattr(self, "_world", None)
         if world is not None:
-            self._handles = {}
+            self._handles, self._shapes = {}, []
             world.destroy()
             self._world = None

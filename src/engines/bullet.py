@@ -1,7 +1,8 @@
 """Bullet (pybullet) broad phases: the dynamic AABB tree (btDbvtBroadphase) and brute force.
 
 pybullet exposes no pair list of its broad phase in bulk, only the narrow phase's contacts:
-circles become spheres in the z = 0 plane, spheres are themselves (mass 1, no gravity, never stepped), moved one by one
+circles become spheres in the z = 0 plane, spheres are themselves, boxes are box shapes of their
+half-extents (2D boxes as deep as they are wide, at z = 0) (mass 1, no gravity, never stepped), moved one by one
 with `resetBasePositionAndOrientation` (there is no batch setter), and `pairs()` runs
 `performCollisionDetection` and reads `getContactPoints`. Bullet keeps contacts up to its
 contact breaking threshold (0.02 units) apart, and its tree uses fattened boxes: such pairs
@@ -19,7 +20,7 @@ from interface.quiet import native_output_silenced
 with native_output_silenced():  # pybullet prints its build time from C on import
     import pybullet
 
-from interface.base import BroadPhase, Limits, in_3d
+from interface.base import BroadPhase, Limits, halves_in_3d, in_3d
 from interface.pairs import canonical
 
 
@@ -28,6 +29,7 @@ class _Bullet(BroadPhase):
     reports = "contacts"
     lifecycle = "native"
     dims = (2, 3)
+    shapes = ("balls", "boxes")
     reset_flags = 0
     breaks = ("Bullet stops simulating a non-static object whose AABB extent has a squared length of 1e12 or more "
               "(btCollisionWorld::updateSingleAabb), i.e. spheres of radius ~5.8e5 and up; it cannot create spheres "
@@ -44,11 +46,11 @@ class _Bullet(BroadPhase):
         return fn(*args, physicsClientId=self._client, **kwargs)
 
     def _reset(self, positions, radii):
-        if self.n and radii.min() == 0.0:
+        if self.n and radii.ndim == 1 and radii.min() == 0.0:  # a box of zero width it creates (and misses: tests)
             raise ValueError(f"{self.name}: Bullet cannot create a sphere of radius 0 (object {int(radii.argmin())})")
         self._call(pybullet.resetSimulation, self.reset_flags)
         self._call(pybullet.setGravity, 0.0, 0.0, 0.0)
-        self._shapes: dict[float, int] = {}  # one collision shape per distinct radius, shared
+        self._shapes: dict[tuple, int] = {}  # one collision shape per distinct size, shared
         self._static = self.static if self.static is not None else np.zeros(self.n, dtype=bool)
         self._ids = np.full(self.n, -1, dtype=np.int64)  # each object's body, -1 while it is not alive
         self._index = np.full(2 * self.n + 16, -1, dtype=np.int64)  # body -> object
@@ -58,12 +60,22 @@ class _Bullet(BroadPhase):
             self._create(k, points[k])
         self._find_movers()
 
+    def _shape(self, k: int) -> int:
+        """Object k's collision shape: a sphere of its radius, or a box of its half-extents."""
+        if self.shape == "balls":
+            size = (float(self.radii[k]),)
+        else:
+            size = tuple(halves_in_3d(self.radii[k:k + 1])[0].tolist())
+        if size not in self._shapes:
+            if len(size) == 1:
+                self._shapes[size] = self._call(pybullet.createCollisionShape, pybullet.GEOM_SPHERE, radius=size[0])
+            else:
+                self._shapes[size] = self._call(pybullet.createCollisionShape, pybullet.GEOM_BOX, halfExtents=size)
+        return self._shapes[size]
+
     def _create(self, k: int, xyz: list[float]) -> None:
-        r = float(self.radii[k])
-        if r not in self._shapes:
-            self._shapes[r] = self._call(pybullet.createCollisionShape, pybullet.GEOM_SPHERE, radius=r)
         uid = self._call(pybullet.createMultiBody, baseMass=0.0 if self._static[k] else 1.0,
-                         baseCollisionShapeIndex=self._shapes[r], basePosition=xyz)
+                         baseCollisionShapeIndex=self._shape(k), basePosition=xyz)
         if uid >= len(self._index):
             self._index = np.concatenate([self._index, np.full(uid + 1, -1, dtype=np.int64)])
         self._ids[k], self._index[uid] = uid, k

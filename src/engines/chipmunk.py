@@ -3,7 +3,9 @@
 Chipmunk only hands pairs to Python after its own box test and shape collision. To observe the
 box-overlap set itself, each circle is given a square sensor shape of side 2r by default, whose
 collision test is exactly the box test; `shape="circle"` uses circle shapes instead (then only
-truly overlapping circles come back). Bodies are kinematic, moved with pymunk's batch API;
+truly overlapping circles come back). Boxes are box polygons of their extents (a cpBB in the
+index, the polygons' collision their overlap); a box that changes its extents as its body rotates
+gets its polygon's new vertices in place, as a project's own rotating body would. Bodies are kinematic, moved with pymunk's batch API;
 `pairs()` runs `space.step` (index update, pair search, shape collision; sensors skip the
 solver) and reads the arbiters in one batch call. Statics and spawning natively: a static object
 is a shape on a static body, in the space's static index (never re-indexed, never paired with
@@ -59,6 +61,7 @@ class _Chipmunk(BroadPhase):
     reports = "boxes"
     defaults = {"shape": "box"}
     lifecycle = "native"
+    shapes = ("balls", "boxes")
 
     def __init__(self, **params):
         super().__init__(**params)
@@ -66,6 +69,20 @@ class _Chipmunk(BroadPhase):
             raise ValueError(f"{self.name}: shape must be one of {', '.join(SHAPES)}, got {self.params['shape']!r}")
         if self.params["shape"] == "circle":
             self.reports = "contacts"
+
+    def _sizes_to_reset(self, radii, extents, n):
+        sizes = super()._sizes_to_reset(radii, extents, n)
+        if self.shape == "boxes" and self.params["shape"] == "circle":
+            raise ValueError(f"{self.name}: shape='circle' is for circles; boxes are box polygons (shape='box')")
+        return sizes
+
+    def _polygon(self, body: pymunk.Body, size) -> pymunk.Shape:
+        """The object's shape: a box of its extents, the square of its circle, or the circle."""
+        if self.shape == "boxes":
+            return pymunk.Poly.create_box(body, (2.0 * size[0], 2.0 * size[1]), 0.0)
+        if self.params["shape"] == "box":
+            return pymunk.Poly.create_box(body, (2.0 * size, 2.0 * size), 0.0)
+        return pymunk.Circle(body, size)
 
     def _configure(self, space: pymunk.Space, positions: np.ndarray, radii: np.ndarray) -> None:
         """Choose the spatial index (the tree is Chipmunk's default)."""
@@ -83,10 +100,7 @@ class _Chipmunk(BroadPhase):
         for (x, y), r, fixed in zip(positions.tolist(), radii.tolist(), static.tolist()):
             body = pymunk.Body(body_type=pymunk.Body.STATIC if fixed else pymunk.Body.KINEMATIC)
             body.position = (x, y)
-            if self.params["shape"] == "box":
-                shape = pymunk.Poly.create_box(body, (2.0 * r, 2.0 * r), 0.0)
-            else:
-                shape = pymunk.Circle(body, r)
+            shape = self._polygon(body, r)
             shape.sensor = True
             self._items.append((body, shape))
         present = [part for i in np.flatnonzero(alive).tolist() for part in self._items[i]]
@@ -124,6 +138,15 @@ class _Chipmunk(BroadPhase):
         flat = (positions if self._in_order else positions[self._visit]).ravel().copy()
         self._positions.set_float_buf(flat)
         batch.set_space_bodies(self._space, batch.BodyFields.POSITION, self._positions)
+
+    def _reshape(self, positions):
+        """Boxes took new extents (bodies rotated): each changed polygon gets its new vertices in
+        place (Chipmunk reindexes its box at the next step); statics keep theirs (the interface checks)."""
+        changed = np.flatnonzero((self._all_radii != self.radii).any(axis=1))
+        self.radii = self._all_radii
+        for i, (hx, hy) in zip(changed.tolist(), self.radii[changed].tolist()):
+            self._items[i][1].unsafe_set_vertices([(-hx, -hy), (hx, -hy), (hx, hy), (-hx, hy)])
+        self._update(positions)
 
     def _pairs(self):
         self._space.step(STEP_DT)

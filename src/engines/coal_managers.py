@@ -4,7 +4,8 @@ coal's binding cannot hand the broad phase's own pair list to Python (the collec
 list has no converter, and callback classes cannot be subclassed from Python), so pairs come
 from `CollisionCallBackDefault`: the managers' candidates after coal's narrow phase, collected
 in C++, mapped back through each sphere's geometry id. Circles are spheres in the plane z = 0
-(spheres are themselves);
+(spheres are themselves); boxes are coal boxes of their extents (2D boxes at z = 0, as deep as
+they are wide);
 `setTranslation` does not refresh an object's box, so `update` calls `computeAABB` too.
 """
 
@@ -13,7 +14,7 @@ from __future__ import annotations
 import coal
 import numpy as np
 
-from interface.base import BroadPhase, Limits, hash_cells_problem, in_3d
+from interface.base import BroadPhase, Limits, halves_in_3d, hash_cells_problem, in_3d, per_axis
 from interface.knobs import HASH_CELL_FACTORS, Knob, mean_diameter, sizes
 from interface.pairs import canonical
 
@@ -28,6 +29,7 @@ class _Coal(BroadPhase):
     exact = False
     reports = "contacts"
     dims = (2, 3)
+    shapes = ("balls", "boxes")
     manager = ""  # the coal class name
     limits = RADIUS_SUM
 
@@ -35,7 +37,10 @@ class _Coal(BroadPhase):
         return getattr(coal, self.manager)()
 
     def _reset(self, positions, radii):
-        self._geoms = [coal.Sphere(float(r)) for r in radii.tolist()]
+        if self.shape == "boxes":  # coal's box takes its full sides
+            self._geoms = [coal.Box(*sides) for sides in (2.0 * halves_in_3d(radii)).tolist()]
+        else:
+            self._geoms = [coal.Sphere(float(r)) for r in radii.tolist()]
         self._objects = []
         for g, xyz in zip(self._geoms, in_3d(positions)):
             tf = coal.Transform3s()
@@ -159,9 +164,9 @@ class CoalHash(_Coal):
         cell = self.params["cell"] or (4.0 * float(radii.mean()) if len(radii) else 1.0)
         self._cell = float(cell) or 1.0
         self._check_cells(positions)
-        lo = (positions - radii[:, None]).min(axis=0) if len(radii) else np.zeros(self.dim)
-        hi = (positions + radii[:, None]).max(axis=0) if len(radii) else np.ones(self.dim)
-        if self.dim == 2:  # the plane z = 0, as deep as the largest circle
+        lo = (positions - per_axis(radii)).min(axis=0) if len(radii) else np.zeros(self.dim)
+        hi = (positions + per_axis(radii)).max(axis=0) if len(radii) else np.ones(self.dim)
+        if self.dim == 2:  # the plane z = 0, as deep as the largest circle or box
             r = float(radii.max()) if len(radii) else 1.0
             lo, hi = np.append(lo, -r), np.append(hi, r)
         return coal.SpatialHashingCollisionManager(float(cell), lo, hi)

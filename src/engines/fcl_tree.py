@@ -11,6 +11,8 @@ Spheres use all three translations, so there the index goes into the rotation in
 off-diagonal entries of a rotation matrix within 1e-12 of the identity (i mod 2^20 and i // 2^20,
 in steps of 2^-60). FCL takes such a matrix as the identity (Eigen's isIdentity, to 1e-12) and
 boxes the sphere exactly as unrotated, so its boxes are again bit for bit the spheres' own.
+Boxes are FCL boxes of their extents (2D boxes as deep as they are wide); a box under that
+rotation is boxed up to 1e-12 of its size wider, which can only add touching candidates.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from __future__ import annotations
 import fcl
 import numpy as np
 
-from interface.base import BroadPhase, Limits
+from interface.base import BroadPhase, Limits, halves_in_3d
 from interface.pairs import canonical
 
 TINY_RADIUS = 1e-300
@@ -57,16 +59,22 @@ class FclTree(BroadPhase):
     exact = False
     reports = "boxes"
     dims = (2, 3)
+    shapes = ("balls", "boxes")
+
+    def _geometries(self, radii: np.ndarray) -> list:
+        """Spheres of the radii (floored, see above), or boxes of the half-extents (FCL's box takes its sides)."""
+        if self.shape == "boxes":
+            return [fcl.Box(*sides) for sides in np.maximum(2.0 * halves_in_3d(radii), TINY_RADIUS).tolist()]
+        return [fcl.Sphere(max(r, TINY_RADIUS)) for r in radii.tolist()]
 
     def _reset(self, positions, radii):
+        shapes = self._geometries(radii)
         if self.dim == 3:
-            self._objects = [fcl.CollisionObject(fcl.Sphere(max(r, TINY_RADIUS)), fcl.Transform(tagging_rotation(i), xyz))
-                             for i, (xyz, r) in enumerate(zip(positions, radii.tolist()))]
+            self._objects = [fcl.CollisionObject(shape, fcl.Transform(tagging_rotation(i), xyz))
+                             for i, (xyz, shape) in enumerate(zip(positions, shapes))]
         else:
-            self._objects = [
-                fcl.CollisionObject(fcl.Sphere(max(r, TINY_RADIUS)), fcl.Transform(np.array([x, y, i * INDEX_STEP])))
-                for i, ((x, y), r) in enumerate(zip(positions.tolist(), radii.tolist()))
-            ]
+            self._objects = [fcl.CollisionObject(shape, fcl.Transform(np.array([x, y, i * INDEX_STEP])))
+                             for i, ((x, y), shape) in enumerate(zip(positions.tolist(), shapes))]
         self._manager = fcl.DynamicAABBTreeCollisionManager()
         self._manager.registerObjects(self._objects)
         self._manager.setup()

@@ -1,7 +1,10 @@
-"""MuJoCo's collision pipeline: its sweep-and-prune broad phase and sphere contacts.
+"""MuJoCo's collision pipeline: its sweep-and-prune broad phase and sphere (or box) contacts.
 
 The model is built with `MjSpec`: one body per object with a free joint and a sphere geom (at
 z = 0 for circles; mocap bodies would be welded to the world, whose pairs MuJoCo filters out), gravity 0.
+Boxes are box geoms of their half-extents (2D boxes at z = 0, as deep as they are wide); a box
+that changes its extents as its body rotates gets its new size, bounding radius and box in the
+compiled model, in place (a compile per frame would take seconds).
 Per frame the positions go into `qpos` as one array write, `mj_kinematics` places the geoms and
 `mj_collision` runs the broad phase and the narrow phase; the pairs are the contacts'
 geoms (`d.contact.geom[:ncon]`), read as one array: "contacts". MuJoCo times its own broad phase
@@ -30,7 +33,8 @@ import warnings
 import mujoco
 import numpy as np
 
-from interface.base import EMPTY_PAIRS, BroadPhase, Limits, in_3d
+from interface.base import EMPTY_PAIRS, BroadPhase, Limits, halves_in_3d, in_3d
+from interface.pairs import canonical
 
 MAX_BODIES = 65533  # mjModel counts bodies (the world included) in 16 bits, less a few reserved ids
 ARENA_BYTES_PER_BODY_PAIR = 4.1  # the broad phase's scratch, in bytes per n^2 (measured, above)
@@ -55,13 +59,14 @@ class MujocoSap(BroadPhase):
     reports = "contacts"
     lifecycle = "native"
     dims = (2, 3)
+    shapes = ("balls", "boxes")
     breaks = ("MuJoCo's sweep and prune runs along the principal axis of all the geoms: spheres that touch exactly "
               "can be lost to rounding there (a pair found alone, missed among 30 others).")
     # Boxes reaching 1e300 from the origin (a sphere of radius 1e300 at (1e300, 1e300)) stopped it
     # with "mju_makeFrame: xaxis of contact frame undefined" (its distances square and overflow),
     # and a sphere of radius 1e308 lost its pairs; 1e150 keeps every square finite.
     limits = Limits(zero_radius=False, objects=MAX_BODIES, reach=1e150,
-                    why="MuJoCo's spheres need a positive size, it numbers bodies in 16 bits, and its contact "
+                    why="MuJoCo's spheres and boxes need a positive size, it numbers bodies in 16 bits, and its contact "
                         "frames square distances, which overflow a double past 1e154")
 
     def _reset(self, positions, radii):
@@ -80,15 +85,15 @@ class MujocoSap(BroadPhase):
         static = self.static if self.static is not None else np.zeros(n, dtype=bool)
         self._movers = np.flatnonzero(~static)
         points = in_3d(self._positions).tolist()
+        kind, sizes = self._geoms()
         for k in np.flatnonzero(static).tolist():
-            spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[float(self._radii[k]), 0.0, 0.0],
-                                    pos=points[k])
-        for k, r in zip(self._movers.tolist(), self._radii[self._movers].tolist()):
+            spec.worldbody.add_geom(type=kind, size=sizes[k], pos=points[k])
+        for k in self._movers.tolist():
             # Mass and inertia given, not derived from the sphere: a tiny sphere would be too light
             # for MuJoCo ("mass and inertia of moving bodies must be larger than mjMINVAL").
             body = spec.worldbody.add_body(pos=points[k], mass=1.0, inertia=[1.0, 1.0, 1.0], explicitinertial=True)
             body.add_freejoint()
-            body.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[r, 0.0, 0.0])
+            body.add_geom(type=kind, size=sizes[k])
         self._contact_room = contact_room
         with warnings.catch_warnings():
             # Only positions and collisions are computed here (mj_kinematics, mj_collision), never
@@ -102,6 +107,7 @@ class MujocoSap(BroadPhase):
         self._geom_object = np.empty(len(body), dtype=np.int64)
         self._geom_object[world] = np.flatnonzero(static)
         self._geom_object[~world] = self._movers[body[~world] - 1]
+        self._object_geom = np.argsort(self._geom_object)
         self._switch(self.alive if self.alive is not None else np.ones(n, dtype=bool))
         self._qpos = self._data.qpos.reshape(len(self._movers), 7) if len(self._movers) else np.zeros((0, 7))
         self._qpos[:, 3] = 1.0  # unit quaternion
@@ -109,6 +115,28 @@ class MujocoSap(BroadPhase):
         self._full = self._data.warning[mujoco.mjtWarning.mjWARN_CONTACTFULL]
         self._engine_s = None
         self._update(self._positions)
+
+    def _geoms(self) -> tuple[int, list[list[float]]]:
+        """The geom type and each object's size: spheres of the radii, or boxes of the half-extents."""
+        if self.shape == "boxes":
+            return mujoco.mjtGeom.mjGEOM_BOX, halves_in_3d(self._radii).tolist()
+        return mujoco.mjtGeom.mjGEOM_SPHERE, [[r, 0.0, 0.0] for r in self._radii.tolist()]
+
+    def _reshape(self, positions):
+        """Boxes took new extents (bodies rotated): their geoms' sizes, bounding radii and boxes
+        in the compiled model, which MuJoCo's broad and narrow phases read."""
+        self.radii = self._radii = self._all_radii
+        geoms = self._object_geom
+        halves = halves_in_3d(self._radii)
+        model = self._model
+        model.geom_size[geoms] = halves
+        model.geom_rbound[geoms] = np.sqrt((halves**2).sum(axis=1))
+        model.geom_aabb[geoms, 3:] = halves
+        # Each moving body's bounding-volume node (its one geom's box), which the mid phase reads:
+        # left as compiled, pairs of a grown box were lost.
+        movers = self._movers
+        model.bvh_aabb[model.body_bvhadr[model.geom_bodyid[geoms[movers]]], 3:] = halves[movers]
+        self._update(positions)
 
     def _switch(self, alive: np.ndarray) -> None:
         """Collision masks on for the objects alive, off for the others (parked)."""
@@ -138,6 +166,8 @@ class MujocoSap(BroadPhase):
         if not ncon:
             return EMPTY_PAIRS.copy()
         objects = self._geom_object[self._data.contact.geom[:ncon]]
+        if self.shape == "boxes":  # two boxes meet in up to 4 contacts (a sphere pair in one)
+            return canonical(objects[:, 0], objects[:, 1])
         return np.column_stack([objects.min(axis=1), objects.max(axis=1)])
 
     def _collide(self) -> float:

@@ -1,7 +1,10 @@
 """NVIDIA PhysX 5 broad phases through ovphysx (CPU mode): sweep and prune, multi-box pruning, and
 the GPU broad phase, which PhysX runs as its parallel automatic box pruning (PABP) on the CPU.
 
-ovphysx simulates a USD stage: the objects become `Sphere` prims (circles in the plane z = 0), each a
+ovphysx simulates a USD stage: the objects become `Sphere` prims (circles in the plane z = 0), or
+`Cube` prims of side 2 scaled by a box's half-extents (2D boxes at z = 0, as deep as they are
+wide; a box that changes its extents is a stage written anew: USD scales cannot be written in
+bulk through ovphysx), each a
 rigid body with a collider and a contact report, in a `PhysicsScene` whose
 `physxScene:broadphaseType` selects the broad phase ("SAP", "MBP" or "GPU"), gravity 0, sleeping
 off. The stage is written as a .usda file, populated through ovstage and attached once. Per
@@ -25,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from interface.base import EMPTY_PAIRS, FLOAT32_BREAKS, BroadPhase, Limits, in_3d
+from interface.base import EMPTY_PAIRS, FLOAT32_BREAKS, BroadPhase, Limits, halves_in_3d, in_3d
 from interface.pairs import canonical
 from interface.quiet import native_output_silenced
 
@@ -76,23 +79,31 @@ def scene_usda(positions: np.ndarray, radii: np.ndarray, broadphase: str, static
              '["PhysxSceneAPI"]', "    )", "    {", "        vector3f physics:gravityDirection = (0, 0, -1)",
              "        float physics:gravityMagnitude = 0", f'        uniform token physxScene:broadphaseType = "{broadphase}"',
              "        bool physxScene:enableGPUDynamics = false", "    }"]
-    body = ('    def Sphere "s{i}" (\n        prepend apiSchemas = ["PhysicsRigidBodyAPI", "PhysicsCollisionAPI", '
-            '"PhysxContactReportAPI", "PhysxRigidBodyAPI"]\n    )\n    {{\n        double radius = {r!r}\n'
-            '        double3 xformOp:translate = ({x!r}, {y!r}, {z!r})\n        uniform token[] xformOpOrder = '
-            '["xformOp:translate"]\n        float physxContactReport:threshold = 0\n'
-            '        float physxRigidBody:sleepThreshold = 0\n{off}    }}')
-    # A static object is a collider without a rigid body: PhysX puts it in its static pruner and
-    # never pairs two of them.
-    # An object that is not alive has its collision off (see _PhysX._enable).
-    fixed = ('    def Sphere "f{i}" (\n        prepend apiSchemas = ["PhysicsCollisionAPI"]\n    )\n    {{\n'
-             '        double radius = {r!r}\n        double3 xformOp:translate = ({x!r}, {y!r}, {z!r})\n'
-             '        uniform token[] xformOpOrder = ["xformOp:translate"]\n{off}    }}')
-    off = "        bool physics:collisionEnabled = 0\n"
+    # A moving object is a rigid body with a contact report; a static object is a collider without
+    # a rigid body: PhysX puts it in its static pruner and never pairs two of them.
+    mover = ('(\n        prepend apiSchemas = ["PhysicsRigidBodyAPI", "PhysicsCollisionAPI", "PhysxContactReportAPI", '
+             '"PhysxRigidBodyAPI"]\n    )\n    {{\n{shape}        float physxContactReport:threshold = 0\n'
+             '        float physxRigidBody:sleepThreshold = 0\n{off}    }}')
+    fixed = '(\n        prepend apiSchemas = ["PhysicsCollisionAPI"]\n    )\n    {{\n{shape}{off}    }}'
+    # A ball is a Sphere of its radius; a box a Cube of side 2 scaled by its half-extents.
+    sphere = ('        double radius = {r!r}\n        double3 xformOp:translate = ({x!r}, {y!r}, {z!r})\n'
+              '        uniform token[] xformOpOrder = ["xformOp:translate"]\n')
+    cube = ('        double size = 2\n        double3 xformOp:translate = ({x!r}, {y!r}, {z!r})\n'
+            '        float3 xformOp:scale = ({hx!r}, {hy!r}, {hz!r})\n'
+            '        uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:scale"]\n')
+    off = "        bool physics:collisionEnabled = 0\n"  # an object that is not alive (see _PhysX._enable)
     static = np.zeros(len(radii), dtype=bool) if static is None else static
     alive = np.ones(len(radii), dtype=bool) if alive is None else alive
-    lines += [(fixed if still else body).format(i=i, r=r, x=x, y=y, z=z, off="" if on else off)
-              for i, ((x, y, z), r, still, on) in enumerate(zip(in_3d(positions).tolist(), radii.tolist(),
-                                                                static.tolist(), alive.tolist()))]
+    boxes = radii.ndim == 2
+    sizes = halves_in_3d(radii).tolist() if boxes else radii.tolist()
+    for i, ((x, y, z), size, still, on) in enumerate(zip(in_3d(positions).tolist(), sizes, static.tolist(),
+                                                          alive.tolist())):
+        if boxes:
+            shape = cube.format(x=x, y=y, z=z, hx=size[0], hy=size[1], hz=size[2])
+        else:
+            shape = sphere.format(x=x, y=y, z=z, r=size)
+        prim = f'    def {"Cube" if boxes else "Sphere"} "{"f" if still else "s"}{i}" '
+        lines.append(prim + (fixed if still else mover).format(shape=shape, off="" if on else off))
     return "\n".join(lines + ["}"]) + "\n"
 
 
@@ -117,13 +128,14 @@ class _PhysX(BroadPhase):
     reports = "contacts"
     lifecycle = "native"
     dims = (2, 3)
+    shapes = ("balls", "boxes")
     breaks = FLOAT32_BREAKS
     # A sphere of radius 0 is an invalid shape to PhysX: it leaves the object out, and its pairs are lost.
     # At its default density a sphere's inverse inertia, 1 / (1.7e3 r^5), overflows float32 below
     # r = 4.4e-9 (measured: 4e-9 fails, 4.5e-9 runs); PhysX then rejects the body's pose and the step fails.
     # Beyond float32's range (3.4e38) a radius or coordinate is infinite to it: no pair at all.
     limits = Limits(zero_radius=False, min_radius=1e-8, coordinate=1e38, radius=1e38,
-                    why="PhysX cannot create a sphere of radius 0, under r = 4.4e-9 its inverse inertia "
+                    why="PhysX cannot create a sphere or box of size 0, under r = 4.4e-9 its inverse inertia "
                         "overflows float32, and beyond 3.4e38 float32 has no values")
     broadphase = ""  # physxScene:broadphaseType
 

@@ -1,7 +1,9 @@
 """Rapier (the `rapier3d` bindings): its BVH broad phase, run by a collision pipeline on colliders
 without bodies.
 
-Each object is a ball collider (circles at z = 0) that collides with every other kind
+Each object is a ball collider (circles at z = 0), or a cuboid collider of a box's half-extents
+(2D boxes at z = 0, as deep as they are wide; a rotating body's box gets its new cuboid in
+place), that collides with every other kind
 (`ActiveCollisionTypes.all()`: colliders without bodies are fixed, and fixed pairs are skipped by
 default). Per frame each collider's translation is set through the binding (there is no batch
 setter), then `CollisionPipeline.step` updates the BVH and the pair set; `contact_pairs()` is every
@@ -20,7 +22,7 @@ from dataclasses import replace
 import numpy as np
 import rapier3d
 
-from interface.base import EMPTY_PAIRS, FLOAT32_BREAKS, FLOAT32_LIMITS, BroadPhase, in_3d
+from interface.base import EMPTY_PAIRS, FLOAT32_BREAKS, FLOAT32_LIMITS, BroadPhase, halves_in_3d, in_3d
 from interface.checks import shown
 from interface.knobs import Knob, fixed
 
@@ -39,6 +41,7 @@ class RapierBvh(BroadPhase):
     defaults = {"prediction": 0.002}
     lifecycle = "native"
     dims = (2, 3)
+    shapes = ("balls", "boxes")
     sweeps = (Knob("prediction", fixed([1e-4, 0.002, 0.02, 0.2, 2.0]), "prediction distance"),)
 
     def _reset(self, positions, radii):
@@ -60,9 +63,11 @@ class RapierBvh(BroadPhase):
 
     def _insert(self, k: int, xyz: list[float]) -> None:
         kinds = rapier3d.ActiveCollisionTypes.default_types() if self._static[k] else rapier3d.ActiveCollisionTypes.all()
-        handle = self._colliders.insert(rapier3d.Collider.ball(float(self.radii[k]))
-                                        .translation(xyz).active_collision_types(kinds)
-                                        .build())
+        if self.shape == "boxes":
+            made = rapier3d.Collider.cuboid(*halves_in_3d(self.radii[k:k + 1])[0].tolist())
+        else:
+            made = rapier3d.Collider.ball(float(self.radii[k]))
+        handle = self._colliders.insert(made.translation(xyz).active_collision_types(kinds).build())
         if handle.index >= len(self._object_of):
             self._object_of = np.concatenate([self._object_of, np.full(handle.index + 1, -1, dtype=np.int64)])
         self._handles[k], self._object_of[handle.index] = handle, k
@@ -84,6 +89,16 @@ class RapierBvh(BroadPhase):
         colliders = self._colliders
         for handle, xyz in zip(self._mover_handles, in_3d(positions[self._movers]).tolist()):
             colliders[handle].translation = xyz
+
+    def _reshape(self, positions):
+        """Boxes took new extents (bodies rotated): each changed collider gets its new cuboid."""
+        changed = np.flatnonzero((self._all_radii != self.radii).any(axis=1))
+        self.radii = self._all_radii
+        colliders = self._colliders
+        for k, halves in zip(changed.tolist(), halves_in_3d(self.radii[changed]).tolist()):
+            if self._handles[k] is not None:
+                colliders[self._handles[k]].shape = rapier3d.SharedShape.cuboid(*halves)
+        self._update(positions)
 
     def _pairs(self):
         self._pipeline.step(float(self.params["prediction"]), self._islands, self._broad, self._narrow, self._bodies,

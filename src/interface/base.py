@@ -185,6 +185,16 @@ def in_3d(positions: np.ndarray, dtype=np.float64) -> np.ndarray:
     return points
 
 
+def halves_in_3d(halves: np.ndarray) -> np.ndarray:
+    """Boxes' half-extents (n, 3) for an engine that works in three dimensions: a 2D box (in the
+    plane z = 0, where every depth overlaps) as deep as it is wide, a box that is a point 1 deep;
+    3D boxes as they are."""
+    if halves.shape[1] == 3:
+        return halves
+    depth = halves.max(axis=1, initial=0.0)
+    return np.column_stack([halves, np.where(depth > 0, depth, 1.0)])
+
+
 def hash_cells_problem(positions: np.ndarray, radii: np.ndarray, cell: float, most: int, dims: int = 2,
                        reach: float = math.inf) -> str | None:
     """What is wrong for a spatial hash of cells of size `cell` that walks every cell an object's
@@ -236,6 +246,9 @@ class BroadPhase(ABC):
     # The shapes it takes (see Shape): every backend takes balls; those whose structure holds
     # boxes of any extents exactly also take "boxes". A backend without them refuses boxes in one line.
     shapes: ClassVar[tuple[Shape, ...]] = ("balls",)
+    # Whether `_update` takes boxes' new extents (in `radii`) like a move: a structure kept over
+    # frames with a skin, whose boxes grown by the skin still hold a box that grew within it.
+    resizes: ClassVar[bool] = False
 
     def __init__(self, **params: Any) -> None:
         unknown = sorted(set(params) - set(self.defaults))
@@ -314,17 +327,18 @@ class BroadPhase(ABC):
 
     def _sizes_to_reset(self, radii: object, extents: object, n: int) -> np.ndarray:
         """The objects' sizes checked: radii (n,) for balls, half-extents (n, d) for boxes, where
-        this backend takes boxes (a one-line error otherwise); sets `shape`."""
+        this backend takes boxes (a one-line error otherwise); sets `shape`. A copy of the caller's
+        array: one changed in place and handed to update must still read as a change."""
         if (radii is None) == (extents is None):
             raise ValueError(f"{self.name}: give radii (circles, spheres) or extents (boxes), "
                              + ("not both" if radii is not None else "one of them"))
         if radii is not None:
             self.shape = "balls"
-            return check_radii(radii, n)
+            return check_radii(radii, n).copy()
         if "boxes" not in self.shapes:
             raise ValueError(f"{self.name} takes circles and spheres only (radii): it does not take boxes (extents)")
         self.shape = "boxes"
-        return check_extents(extents, n, self.dim)
+        return check_extents(extents, n, self.dim).copy()
 
     def _reshaped(self, extents: object) -> bool:
         """Take this frame's half-extents of boxes; whether they differ from the last ones."""
@@ -340,12 +354,20 @@ class BroadPhase(ABC):
                 k = int(ids[np.flatnonzero(differs)[0]])
                 raise ValueError(f"{self.name}: object {k} is static but its extents changed, from "
                                  f"{self._all_radii[k].tolist()} to {sizes[k].tolist()}: statics never change")
-        self._all_radii = sizes
+        self._all_radii = sizes.copy()  # ours: the caller may change its array in place for the next frame
         return True
 
     def _reshape(self, positions: np.ndarray) -> None:
-        """Boxes changed their extents (bodies rotated): built anew for them, as at a reset (a
-        backend that can refit its structure in place overrides this)."""
+        """Boxes changed their extents (bodies rotated): where the backend `resizes` and no object
+        came or went, its `_update` takes the new sizes in `radii` as a move; otherwise built anew
+        for them, as at a reset (a backend that can refit its structure in place overrides this)."""
+        if self.resizes and not (len(self.spawned) or len(self.removed)):
+            ids = self._alive_ids
+            self.radii = self._all_radii if ids is None else self._all_radii[ids]
+            if ids is not None:
+                self._held_positions = positions = np.ascontiguousarray(positions[ids])
+            self._update(positions)
+            return
         if self._alive_ids is None and (self._native_lifecycle() or (self.static is None and self.alive is None)):
             self.radii = self._all_radii
             self._reset(positions, self.radii)

@@ -4,7 +4,8 @@ list, the trees, the sweeps and the pairs they found) let each object move befor
 A structure built with a skin holds every pair whose boxes, each enlarged by half the skin, overlap;
 it is reused, exactly, while no object has moved more than skin / 2 since it was built. A wider skin
 lives longer but holds more pairs to test every frame; one that no frame's motion fits is never
-reused and only fattens the build. `largest_step` is the rule, `filter_pairs` tests a kept list
+reused and only fattens the build. `largest_step` is the rule (`largest_reach` for boxes whose
+extents change: a side that moved out by growing counts as moved), `filter_pairs` tests a kept list
 against the boxes of this frame, and `SkinSchedule` picks the skin for the next build from how long
 the last one lived and how many pairs its skin added.
 """
@@ -50,6 +51,27 @@ def largest_step(positions, built, dim):
         for a in range(len(dim)):
             step = max(step, abs(positions[i, a] - built[i, a]))
     return step
+
+
+@nb.njit(cache=True)
+def largest_reach(positions, built, sizes, built_sizes, dim):
+    """Boxes whose extents change: the farthest any box's side has gone out since `built`, its
+    centre's displacement plus its half-extent's growth along any axis (`built_sizes`, the
+    half-extents then). A structure built over boxes grown by half the skin holds every box whose
+    reach is at most skin / 2: a box that grew is a box whose side moved."""
+    reach = 0.0
+    for i in range(positions.shape[0]):
+        for a in range(len(dim)):
+            reach = max(reach, abs(positions[i, a] - built[i, a]) + half_of(sizes, i, a) - half_of(built_sizes, i, a))
+    return reach
+
+
+def skin_used(positions, built, sizes, built_sizes, dim) -> float:
+    """How much of the skin the objects have used since the build (against skin / 2): the largest
+    step, or for boxes whose extents changed since, the largest reach."""
+    if sizes is built_sizes or sizes.ndim == 1:  # balls keep their radii: the kernel over balls as it was
+        return largest_step(positions, built, dim)
+    return largest_reach(positions, built, sizes, built_sizes, dim)
 
 
 @nb.njit(cache=True)

@@ -33,7 +33,7 @@ from .coherent import RepairSchedule, lattice_frame, resort
 from .common import PairCollector, gather, half_of
 from .dimension import marker
 from .morton import bit_length
-from .skin import SkinSchedule, filter_pairs, largest_step
+from .skin import SkinSchedule, filter_pairs, skin_used
 from .tree_search import CHILD, END, NO_CHILD, START, tree_bounds, tree_pairs
 
 # The skin a tree starts with, and the most it grows to, in mean diameters (own/skin.py), as the
@@ -156,6 +156,7 @@ class MortonTree(BroadPhase):
     (own/dimension.py) and compiled for it."""
 
     build = None
+    resizes = True  # new extents: a box that grew is a box whose side moved (skin_used)
 
     def __init__(self, **params):
         super().__init__(**params)
@@ -191,7 +192,8 @@ class MortonTree(BroadPhase):
     def _update(self, positions):
         self._positions = positions
         self._since += 1
-        if self._skin > 0.0 and largest_step(positions, self._anchor, self._dim) <= 0.5 * self._skin:
+        if self._skin > 0.0 and skin_used(positions, self._anchor, self.radii, self._anchor_sizes,
+                                          self._dim) <= 0.5 * self._skin:
             self._stats = {**self._stats, "reused": 1}
             return
         if self.params["coherent"]:
@@ -228,6 +230,7 @@ class MortonTree(BroadPhase):
         self._since, self._builds, self._kept = 0, self._builds + 1, None
         self._refitted, self._visited_at_build, self._drift = 0, None, 0.0  # refits since this build, ...
         self._anchor = positions.copy() if self._skin > 0.0 else None  # where the boxes were grown from
+        self._anchor_sizes = self.radii  # and their sizes (new extents come as a new array)
         self._stats = {"nodes": len(self._nodes), "swaps": swaps, "builds": self._builds, "skin": self._skin,
                        "reused": 0, "refits": self._refits}
 
@@ -256,7 +259,7 @@ class MortonTree(BroadPhase):
         may hold what it holds."""
         n, nodes, bounds, box, dim = self.n, self._nodes, self._bounds, self._box, self.dim
         if self._skin > 0.0:
-            step = largest_step(self._positions, self._anchor, self._dim)
+            step = skin_used(self._positions, self._anchor, self.radii, self._anchor_sizes, self._dim)
             assert step <= 0.5 * self._skin, "an object outran the skin"
         assert np.array_equal(np.sort(self._order), np.arange(n)), "sort order is not a permutation"
         keys = self._work[2]

@@ -27,7 +27,7 @@ from interface.knobs import Knob, fixed, mean_diameter, sizes
 from .common import PairCollector
 from .dimension import marker
 from .grid import UniformGrid
-from .skin import SkinSchedule, filter_pairs, largest_step
+from .skin import SkinSchedule, filter_pairs, skin_used
 from .statics import StaticsApart
 
 PRECISIONS = ("float64", "float32")
@@ -49,6 +49,7 @@ class VerletList(StaticsApart, BroadPhase):
     name, method = "own.verlet", "grid"
     dims = (2, 3)
     shapes = ("balls", "boxes")
+    resizes = True  # new extents: the list is kept until a box outgrows the skin (skin_used)
     defaults = {"skin": None, "every": None, "precision": "float64", "fat": False}
     sweeps = (Knob("skin", sizes(mean_diameter, SKIN_FACTORS), "skin", trial_frames=TRIAL_FRAMES),
               Knob("every", fixed([2, 5, 10, 20]), "rebuild every k frames", period=True),
@@ -76,7 +77,7 @@ class VerletList(StaticsApart, BroadPhase):
 
     def _reset(self, positions, radii):
         self._dim = marker(self.dim)
-        self._radii = self._rounded(radii)
+        self._sizes, self._radii = radii, self._rounded(radii)
         positive = self._radii[self._radii > 0]
         default = DEFAULT_SKIN_DIAMETERS * 2.0 * float(positive.mean()) if len(positive) else 1.0
         self._adapts = self.params["skin"] is None and self.params["every"] is None
@@ -103,22 +104,25 @@ class VerletList(StaticsApart, BroadPhase):
         # last frame's order): at zero skin on the tumbler, 0.306 to 0.2 ms a frame at n = 4096.
         if not math.isfinite(self._largest_radius + 0.5 * self._skin):
             self._skin = 0.0  # radii near the largest double leave no room for a skin (exact without one)
-        if self._built_skin == self._skin:
+        if self._built_skin == self._skin and self._grid_sizes is self._radii:
             self._grid.update(positions)
         else:
             self._grid.reset(positions, **size_keyword(self._radii + 0.5 * self._skin))
-            self._built_skin = self._skin
+            self._built_skin, self._grid_sizes = self._skin, self._radii
         self._list = self._grid.pairs()
-        self._anchor = positions.copy()  # where the list was built
+        self._anchor, self._anchor_sizes = positions.copy(), self._radii  # where and how large, at the build
         self._positions = positions
         self._since = 0
 
     def _update(self, positions):
         positions = self._rounded(positions)
+        if self.radii is not self._sizes:  # boxes took new extents (`resizes`): kept until they outgrow the skin
+            self._sizes, self._radii = self.radii, self._rounded(self.radii)
+            self._largest_radius = float(self._radii.max()) if len(self._radii) else 0.0
         self._since += 1
         every = self.params["every"]
         due = (self._since >= every) if every is not None \
-            else largest_step(positions, self._anchor, self._dim) > 0.5 * self._skin
+            else skin_used(positions, self._anchor, self._radii, self._anchor_sizes, self._dim) > 0.5 * self._skin
         if due:
             if self._adapts:
                 self._skin = self._schedule.next(self._since, len(self._list), self._overlapping, len(positions))
@@ -139,5 +143,5 @@ class VerletList(StaticsApart, BroadPhase):
     def validate(self):
         """While the rule holds, the list holds every current overlap."""
         if self.params["every"] is None:
-            step = largest_step(self._positions, self._anchor, self._dim)
+            step = skin_used(self._positions, self._anchor, self._radii, self._anchor_sizes, self._dim)
             assert step <= 0.5 * self._skin, "an object outran the skin"

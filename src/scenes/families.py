@@ -36,7 +36,7 @@ from tqdm import tqdm
 
 from interface.checks import shown
 
-from . import families3d
+from . import box_families, families3d
 from .recorded import Recording, fill_absent
 from .scene import Scene, check_box
 
@@ -58,6 +58,13 @@ class SceneFamily:
     recipes: dict[int, Callable[..., dict]]
     static_share: float = 0.0
     projectile: float = 0.0
+    # A family of boxes (scenes/box_families.py): per dimension the layout that draws its box,
+    # statics and each box's own half-sizes; its recipe records the boxes' extents every frame.
+    box_layouts: dict[int, Callable[..., dict]] | None = None
+
+    @property
+    def shape(self) -> str:
+        return "balls" if self.box_layouts is None else "boxes"
 
     def static(self, n: int) -> np.ndarray | None:
         count = int(self.static_share * n)
@@ -68,7 +75,10 @@ class SceneFamily:
         return static
 
     def layout(self, n: int, rng: np.random.Generator, radii: tuple[float, float], dim: int) -> dict:
-        """Radii, box and statics of a scene of n slots (the draws its recipe's scene starts from)."""
+        """Radii, box and statics of a scene of n slots (the draws its recipe's scene starts from);
+        for a family of boxes, their half-sizes instead of radii."""
+        if self.box_layouts is not None:
+            return self.box_layouts[dim](n, rng, radii, dim)
         lo, hi = radii
         r = rng.uniform(lo, hi, n)
         static = self.static(n)
@@ -134,9 +144,9 @@ class FamilyMotion:
         for path in cached:
             try:
                 with np.load(path) as data:
-                    alive = data["alive"] if "alive" in data.files else None
-                    return Recording(data["positions"][:frames], None if alive is None else alive[:frames],
-                                     f"{self.engine} {self.family}")
+                    alive = data["alive"][:frames] if "alive" in data.files else None
+                    extents = data["extents"][:frames] if "extents" in data.files else None
+                    return Recording(data["positions"][:frames], alive, f"{self.engine} {self.family}", extents)
             except (OSError, ValueError, KeyError):
                 path.unlink(missing_ok=True)  # a torn file: record again
         return self._simulate(max(frames, FIRST_FRAMES)).record(frames)
@@ -151,12 +161,13 @@ class FamilyMotion:
         fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.stem}.", suffix=".npz")
         os.close(fd)
         try:
-            # The motion only: radii, box and statics come from the family's layout, which draws them the same.
-            np.savez(tmp, **{k: fields[k] for k in ("positions", "alive") if fields.get(k) is not None})
+            # The motion only (with boxes, their extents each frame): radii, box and statics come from
+            # the family's layout, which draws them the same.
+            np.savez(tmp, **{k: fields[k] for k in ("positions", "alive", "extents") if fields.get(k) is not None})
             os.replace(tmp, path)
         finally:
             Path(tmp).unlink(missing_ok=True)
-        return Recording(fields["positions"], fields.get("alive"), f"{self.engine} {self.family}")
+        return Recording(fields["positions"], fields.get("alive"), f"{self.engine} {self.family}", fields.get("extents"))
 
 
 def _frames_of(path: Path) -> int:
@@ -165,12 +176,18 @@ def _frames_of(path: Path) -> int:
 
 def family_scene(family: str, n: int, seed: int = 0, radii: tuple[float, float] | None = None,
                  dim: int = 2) -> Scene:
-    """A scene of `family` with n objects (slots, for rain), circles of radii uniform in `radii`."""
+    """A scene of `family` with n objects (slots, for rain), circles of radii uniform in `radii`;
+    a family of boxes: boxes whose shortest half-side is uniform in `radii`, their extents recorded."""
     if family not in FAMILIES:
         raise ValueError(f"unknown family {family!r}; choose one of {', '.join(FAMILIES)}")
+    shape = SCENE_FAMILIES[family].shape
     if dim not in SCENE_FAMILIES[family].recipes:
-        raise ValueError(f"the {family} family is a scene of circles; over spheres the families are "
-                         f"{', '.join(families_in(3))} (or your own trajectory file with a z column)")
+        kinds = {("balls", 2): "circles", ("balls", 3): "spheres", ("boxes", 2): "boxes in 2D",
+                 ("boxes", 3): "boxes in 3D"}
+        others = [f for f in families_in(dim) if SCENE_FAMILIES[f].shape == shape]
+        raise ValueError(f"the {family} family is a scene of {kinds[shape, 5 - dim]}; over {kinds[shape, dim]} the "
+                         f"families are {', '.join(others)} (or your own trajectory file"
+                         + (" with a z column)" if dim == 3 else ")"))
     if int(n) != n or n < 2:
         raise ValueError(f"a {family} scene needs n >= 2 objects, got {shown(n)}")
     lo, hi = (float(v) for v in (radii or DEFAULT_RADII))
@@ -179,7 +196,9 @@ def family_scene(family: str, n: int, seed: int = 0, radii: tuple[float, float] 
     motion = FamilyMotion(family, int(n), int(seed), (lo, hi), dim)
     record = motion.record(FIRST_FRAMES)
     fields = SCENE_FAMILIES[family].layout(int(n), np.random.default_rng(seed), (lo, hi), dim)
-    return Scene(record.positions[0], fields["radii"], np.zeros((int(n), dim)), box=check_box(fields["box"], dim),
+    extents = None if record.extents is None else record.extents[0]
+    return Scene(record.positions[0], fields.get("radii"), np.zeros((int(n), dim)), extents=extents,
+                 box=check_box(fields["box"], dim),
                  name=f"{family}-n{n}-r{lo:g}-{hi:g}-s{seed}" + ("" if dim == 2 else f"-{dim}d"), walls=False,
                  responds=False, static=fields["static"], motion=motion, meta={"dist": family, "seed": seed, "speed": ""})
 
@@ -438,15 +457,27 @@ SCENE_FAMILIES: dict[str, SceneFamily] = {f.name: f for f in [
                 boxes={2: _level_box}, recipes={2: _level}, static_share=LEVEL_STATIC_SHARE),
     SceneFamily("drum", "everything in motion, a fast layer cascading over a bed turning with the wall",
                 boxes={2: _drum_box}, recipes={2: _drum}),
+    # Boxes (scenes/box_families.py): their box and statics come from their layouts.
+    SceneFamily("pyramid", "boxes stacked at rest, sharing their edges (Box2D's large pyramid)",
+                boxes={}, recipes={2: box_families.pyramid}, box_layouts={2: box_families.pyramid_layout}),
+    SceneFamily("walls", "long static walls and platforms across the level, small boxes falling through",
+                boxes={}, recipes={2: box_families.walls}, box_layouts={2: box_families.walls_layout}),
+    SceneFamily("debris", "long thin boxes (aspect up to 1:20) tumbling: every box changes every frame",
+                boxes={}, recipes={2: box_families.debris}, box_layouts={2: box_families.debris_layout}),
+    SceneFamily("brick_wall", "a wall of bricks at rest, knocked down by a heavy cube",
+                boxes={}, recipes={3: box_families.brick_wall}, box_layouts={3: box_families.brick_wall_layout}),
+    SceneFamily("beams", "long static beams at every height of a hall, crates falling through",
+                boxes={}, recipes={3: box_families.beams}, box_layouts={3: box_families.beams_layout}),
 ]}
 FAMILIES: tuple[str, ...] = tuple(SCENE_FAMILIES)
 TRAITS: dict[str, str] = {name: f.trait for name, f in SCENE_FAMILIES.items()}
 
 
-def families_in(dim: int) -> tuple[str, ...]:
-    """The families recorded in `dim` dimensions (every one over circles; over spheres those with a
-    recipe for them)."""
-    return tuple(name for name, f in SCENE_FAMILIES.items() if dim in f.recipes)
+def families_in(dim: int, shape: str | None = None) -> tuple[str, ...]:
+    """The families recorded in `dim` dimensions (every one of circles; over spheres those with a
+    recipe for them), of one `shape` ("balls", "boxes") where given."""
+    return tuple(name for name, f in SCENE_FAMILIES.items()
+                 if dim in f.recipes and (shape is None or f.shape == shape))
 
 
 FAMILIES_3D = families_in(3)

@@ -16,12 +16,15 @@ ESSAY_RADIUS = 10.0
 ESSAY_COVERAGE = 2048 * 20.0**2 / 2000.0**2
 
 
-def coverage(radii: np.ndarray, box) -> float:
+def coverage(sizes: np.ndarray, box) -> float:
     """Summed area (volume in 3D) of the objects' boxes over the scene box's: the one measure of
-    density every study prints (0 where the box's size overflows a double)."""
+    density every study prints (0 where the box's size overflows a double). `sizes`: radii (n,),
+    or boxes' half-extents (n, d)."""
     extent = box_extent(tuple(box))
     with np.errstate(over="ignore"):
-        return float(((2.0 * radii) ** len(extent)).sum() / np.prod(extent))
+        if sizes.ndim == 2:
+            return float(np.prod(2.0 * sizes, axis=1).sum() / np.prod(extent))
+        return float(((2.0 * sizes) ** len(extent)).sum() / np.prod(extent))
 
 
 def essay_side(n: int, dim: int = 2) -> float:

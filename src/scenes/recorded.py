@@ -71,6 +71,35 @@ class Recording:
         return h.hexdigest()[:12]
 
 
+@dataclass(frozen=True, eq=False)
+class WithoutExtents:
+    """A recording of boxes read as their bounding circles' (or spheres'): its positions and the
+    objects alive in each frame, not its extents."""
+
+    motion: object
+
+    @property
+    def frames(self) -> int:
+        return self.motion.frames
+
+    def record(self, frames: int) -> Recording:
+        record = self.motion.record(frames)
+        return Recording(record.positions, record.alive, f"{record.source} as bounding circles")
+
+    def digest(self) -> str:
+        return f"{self.motion.digest()}-circles"
+
+
+def as_bounding_balls(scene: Scene) -> Scene:
+    """The circle model of a scene of boxes: the same motion, each box given as the circle (sphere)
+    around its first frame's box, which holds the body however it turns (a box holds its body, and
+    a circle about the body's centre is the same turned)."""
+    if scene.extents is None:
+        raise ValueError(f"{scene.name} is a scene of circles or spheres already")
+    motion = None if scene.motion is None else WithoutExtents(scene.motion)
+    return scene.with_(extents=None, radii=scene.radii, motion=motion, name=f"{scene.name}-as-balls")
+
+
 def fill_absent(positions: np.ndarray, alive: np.ndarray) -> np.ndarray:
     """Positions with every slot that is not alive given its nearest alive position (earlier
     first, else later; 0 for a slot never alive), so that every value is finite and a parked slot

@@ -46,11 +46,13 @@ TRIAL_OPTIONS = ("frames", "repeat", "budget", "timeout", "memory")
 
 def add_scene_options(parser: argparse.ArgumentParser, n: int = 2048) -> None:
     g = parser.add_argument_group("scene")
-    g.add_argument("--n", type=int, default=n, help=f"number of objects, circles or spheres (default {n})")
+    g.add_argument("--n", type=int, default=n, help=f"number of objects, circles, spheres or boxes (default {n})")
     g.add_argument("--dist", choices=SCENE_KINDS, default="uniform",
                    help=f"placement moved by the essay's motion ({', '.join(DISTRIBUTIONS)}), or a family recorded "
-                        f"with pymunk ({', '.join(FAMILIES)}; radii 4:8 unless given), over spheres with Bullet "
-                        f"({', '.join(families_in(3))}) (default uniform)")
+                        f"with pymunk ({', '.join(families_in(2, 'balls'))}; radii 4:8 unless given; boxes: "
+                        f"{', '.join(families_in(2, 'boxes'))}), over spheres with Bullet "
+                        f"({', '.join(families_in(3, 'balls'))}; boxes: {', '.join(families_in(3, 'boxes'))}) "
+                        "(default uniform)")
     sizes = g.add_mutually_exclusive_group()
     sizes.add_argument("--radius", type=float, help="equal radii (default 10, the essay's)")
     sizes.add_argument("--radii", metavar="MIN:MAX", help="mixed sizes, log-uniform between MIN and MAX")

@@ -21,6 +21,10 @@ CONCENTRATED = 0.6  # spread along an axis over that of a uniform placement on t
 FAST = 0.5  # displacement per frame in median radii
 RESTING = 0.05  # an object moving less than this many of its radii per frame rests (jitters in place)
 RESTING_CONTACT = 0.5  # share of the movers at rest that makes it a scene of resting contact
+# Boxes: a box is long whose longest side is LONG times the boxes' median side or more; an
+# aspect (longest over shortest side) from ELONGATED on is worth naming.
+LONG = 8.0
+ELONGATED = 4.0
 
 
 @dataclass
@@ -41,6 +45,24 @@ class Traits:
     concentration_z: float = 1.0  # spheres: as x and y (circles: 1)
     dim: int = 2
     recorded: bool = False  # positions and coverage of the objects alive in its fullest frame
+    # Boxes (shape "boxes"; balls leave these be): the share of long boxes, the longest over the
+    # median side, and the boxes' aspect (longest over shortest side, 95th percentile).
+    shape: str = "balls"
+    long_share: float = 0.0
+    longest: float = 1.0
+    aspect: float = 1.0
+
+    def box_words(self) -> list[str]:
+        """The traits of boxes that decide between broad phases: long objects, elongated ones."""
+        if self.shape != "boxes":
+            return []
+        out = []
+        if self.long_share > 0:
+            out.append(f"long objects ({self.long_share:.1%} of the boxes {LONG:g} median sides long or more, the "
+                       f"longest {self.longest:.0f}x)")
+        if self.aspect >= ELONGATED:
+            out.append(f"elongated boxes (aspect up to {self.aspect:.0f}:1)")
+        return out
 
     def recorded_words(self) -> list[str]:
         """The traits of a recorded scene that decide between broad phases, in plain words."""
@@ -58,13 +80,17 @@ class Traits:
 
     def words(self) -> list[str]:
         """Short phrases, the ones that matter first."""
-        out = [f"n = {self.n:,}" + (" (large)" if self.n >= LARGE_N else "") + (" spheres" if self.dim == 3 else "")]
+        things = " boxes" if self.shape == "boxes" else " spheres" if self.dim == 3 else ""
+        out = [f"n = {self.n:,}" + (" (large)" if self.n >= LARGE_N else "") + things]
+        sizes = "sizes" if self.shape == "boxes" else "radii"  # a box's size: its bounding radius
         if self.radius_spread >= WIDE_SPREAD:
-            out.append(f"radii spread {self.radius_spread:.0f}:1")
+            out.append(f"{sizes} spread {self.radius_spread:.0f}:1")
         elif self.radius_spread >= MIXED_SPREAD:
-            out.append(f"mixed sizes (radii spread {self.radius_spread:.1f}:1)")
+            out.append(f"mixed sizes ({sizes} spread {self.radius_spread:.1f}:1)")
         else:
-            out.append("similar sizes" + (f" (radii spread {self.radius_spread:.1f}:1)" if self.radius_spread > 1.01 else ""))
+            out.append("similar sizes" + (f" ({sizes} spread {self.radius_spread:.1f}:1)"
+                                          if self.radius_spread > 1.01 else ""))
+        out += self.box_words()
         along = [a for a, c in (("x", self.concentration_x), ("y", self.concentration_y), ("z", self.concentration_z))
                  if c < CONCENTRATED]
         if len(along) == 1:
@@ -87,11 +113,24 @@ def fullest_frame(traj: Trajectory) -> int:
 
 
 def alive_in_fullest_frame(traj: Trajectory) -> tuple[np.ndarray, np.ndarray]:
-    """(positions, radii) of the objects alive in the first frame with the most of them alive."""
+    """(positions, sizes) of the objects alive in the first frame with the most of them alive:
+    radii (n,), or boxes' half-extents (n, d) in that frame."""
     f = fullest_frame(traj)
     here = traj.alive_at(f)
-    pos, radii = traj.positions[f], traj.scene.radii
-    return (pos, radii) if here is None else (pos[here], radii[here])
+    pos, sizes = traj.positions[f], traj.sizes_at(f)
+    return (pos, sizes) if here is None else (pos[here], sizes[here])
+
+
+def box_traits(extents: np.ndarray) -> dict:
+    """Long objects and elongation of boxes (half-extents (n, d)): Traits' box fields."""
+    if not len(extents):
+        return {"shape": "boxes"}
+    longest_side, shortest_side = extents.max(axis=1), extents.min(axis=1)
+    median = float(np.median(longest_side)) or 1.0
+    positive = shortest_side > 0
+    aspect = float(np.percentile(longest_side[positive] / shortest_side[positive], 95)) if positive.any() else 1.0
+    return {"shape": "boxes", "long_share": float((longest_side >= LONG * median).mean()),
+            "longest": float(longest_side.max() / median), "aspect": aspect}
 
 
 def _coverage(traj: Trajectory, pos: np.ndarray, radii: np.ndarray) -> tuple[float, bool]:
@@ -100,10 +139,11 @@ def _coverage(traj: Trajectory, pos: np.ndarray, radii: np.ndarray) -> tuple[flo
     occupy there (its file's box spans every frame, and its slots include objects not yet
     spawned or gone)."""
     if traj.scene.motion is None:
-        return coverage(traj.scene.radii, traj.scene.box), False
+        return coverage(traj.scene.sizes, traj.scene.box), False
     if not len(radii):
         return 0.0, True
-    box = tuple((pos - radii[:, None]).min(axis=0)) + tuple((pos + radii[:, None]).max(axis=0))
+    halves = radii[:, None] if radii.ndim == 1 else radii
+    box = tuple((pos - halves).min(axis=0)) + tuple((pos + halves).max(axis=0))
     return coverage(radii, box), True
 
 
@@ -122,7 +162,9 @@ def covering(traj: Trajectory) -> str:
 def measure_traits(traj: Trajectory) -> Traits:
     """The traits of the objects alive: where and how large in the fullest frame, how they move
     over every frame."""
-    pos, radii = alive_in_fullest_frame(traj)
+    pos, sizes = alive_in_fullest_frame(traj)
+    boxes = box_traits(sizes) if sizes.ndim == 2 else {}
+    radii = np.sqrt((sizes**2).sum(axis=1)) if sizes.ndim == 2 else sizes  # a box's bounding radius
     n, dim = pos.shape
     positive = radii[radii > 0]
     spread = float(positive.max() / positive.min()) if len(positive) else 1.0
@@ -164,6 +206,7 @@ def measure_traits(traj: Trajectory) -> Traits:
     fast = float((in_radii > 1.0).mean()) if recorded else 0.0
     spawns = float(np.abs(np.diff(alive.astype(np.int8), axis=0)).sum() / ((traj.frames - 1) * n)) \
         if traj.alive is not None and traj.frames > 1 and n else 0.0
-    covered, occupied = _coverage(traj, pos, radii)
+    covered, occupied = _coverage(traj, pos, sizes)
     return Traits(n, spread, dispersion, float(conc[0]), float(conc[1]), step, covered,
-                  traj.scene.static_share, spawns, resting, fast, float(conc[2]) if dim == 3 else 1.0, dim, occupied)
+                  traj.scene.static_share, spawns, resting, fast, float(conc[2]) if dim == 3 else 1.0, dim, occupied,
+                  **boxes)
