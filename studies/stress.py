@@ -25,11 +25,21 @@ from scenes.generate import at_essay_density
 from scenes.io import save_scene
 from scenes.stress import stress_scenes
 
-from .lib.cli import CliError, Parser, command_line, in_dimension, matched_backends, run_cli, warn_unavailable
+from .lib.cli import (CliError, Parser, command_line, compact_names, in_dimension, matched_backends, run_cli,
+                      warn_unavailable)
 from .lib.figures import new_figure, save
 from .lib.harness import Job
-from .lib.options import (add_backends_option, add_dim_option, add_output_options, add_quick_option,
-                          add_scene_file_option, add_trial_options, dim_of, file_scene, parse_checked)
+from .lib.options import (
+    add_backends_option,
+    add_dim_option,
+    add_output_options,
+    add_quick_option,
+    add_scene_file_option,
+    add_trial_options,
+    dim_of,
+    file_scene,
+    parse_checked,
+)
 from .lib.output import Output, read_meta, report_folder
 from .lib.pool import Pool
 from .lib.results import RowWriter, missed_total, read_rows, summarise
@@ -293,6 +303,9 @@ def main(argv: list[str] | None = None) -> int:
     dim = scenes[0].dim
     args.dim = dim
     backends = in_dimension(matched_backends(args.backends), dim)
+    balls_only = [b for b in backends if not engines.works_in(b, dim, "boxes")]
+    if balls_only and any(scene.shape == "boxes" for scene in scenes):  # named once; they run on the others
+        print(f"not run on the box scenes, they take circles and spheres only: {', '.join(compact_names(balls_only))}")
     with Output(args.out, "stress", command_line("stress", argv), args.resume) as out:
         report_dir = report_folder(args, out.path)
         missing = warn_unavailable(backends)
@@ -307,9 +320,11 @@ def main(argv: list[str] | None = None) -> int:
                 if scene.moves:
                     traj = runner.trajectory(scene, args.frames + 1)
                     drift[scene.name] = {**traj.drift(), "swept_contacts": int(len(traj.swept_contacts))}
+                takers = backends if scene.shape == "balls" else [b for b in backends
+                                                                   if engines.works_in(b, dim, scene.shape)]
                 runner.run_all([Job(backend, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout,
                                     memory_mb=args.memory, count_tunneling=scene.moves, scene=scene,
-                                    frames=args.frames, tag={"experiment": SCENES}) for backend in backends],
+                                    frames=args.frames, tag={"experiment": SCENES}) for backend in takers],
                                desc=f"stress: {scene.name}")
             largest_n(runner, backends, args)
         writer.finish()

@@ -13,8 +13,9 @@ from scenes import generate
 from scenes.box_families import turned_halves_2d, turned_halves_3d
 from scenes.families import cache_dir, families_in
 from scenes.motion import simulate
+from scenes.stress import box_stress
 from studies import boxes as boxes_study
-from studies import compare, recommend
+from studies import compare, recommend, stress
 from studies.lib.traits import measure_traits
 
 BOX_FAMILIES = [(family, dim) for dim in (2, 3) for family in families_in(dim, "boxes")]
@@ -108,3 +109,29 @@ def test_the_boxes_study_sets_each_backend_on_boxes_beside_their_bounding_circle
     assert summary.circle_model_per_box_pair.iloc[0] > 1.5  # the walls' bounding circles overlap far more
     table = md.split("## walls (2D), n = 300", 1)[1]
     assert "| own.grid | " in table and "| scipy.kdtree |" not in table  # ranked on the boxes
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_the_box_stress_scenes_leave_our_backends_exact(tmp_path, capsys, dim):
+    """Walls across the world, a box as long as the world, boxes of zero width, aspect 1:1e6."""
+    out = tmp_path / "stress"
+    assert stress.main(["--scenes", "boxes_*", "--dim", str(dim), "--frames", "2", "--max-n", "1024",
+                        "--backends", "own.grid,own.sap,own.bvh,own.quadtree,own.verlet,scipy.kdtree",
+                        "--out", str(out), "--report-dir", str(out)]) == 0
+    assert "not run on the box scenes, they take circles and spheres only: scipy.*" in capsys.readouterr().out
+    outcomes = pd.read_csv(out / "outcomes.csv")
+    boxes = outcomes[outcomes.scene.str.startswith("boxes_")]
+    assert set(boxes.scene) == {"boxes_walls_across", "boxes_as_long_as_world", "boxes_zero_width",
+                                "boxes_aspect_1e6"}
+    assert (boxes.outcome == "exact").all() and "scipy.kdtree" not in set(boxes.backend)
+
+
+def test_the_box_stress_scenes_are_what_they_say():
+    walls = box_stress("walls_across")
+    side = walls.box[2] - walls.box[0]
+    assert (2 * walls.extents[:8].max(axis=1) >= side).all()  # end to end
+    assert box_stress("as_long_as_world").extents[0, 0] * 2 >= side
+    zero = box_stress("zero_width").extents
+    assert (zero.min(axis=1) == 0).all() and (zero.max(axis=1) == 0).any()
+    thin = box_stress("aspect_1e6", dim=3).extents
+    assert np.allclose(thin.max(axis=1) / thin.min(axis=1), 1e6)

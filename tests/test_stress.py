@@ -12,6 +12,7 @@ import pandas as pd
 import pytest
 
 import engines
+from interface.base import size_keyword
 from interface.pairs import keys
 from own.brute import brute_pairs
 from scenes.motion import simulate
@@ -37,13 +38,14 @@ def check_exact(backend, trajectories):
     """Every frame of every trajectory: exactly the box overlaps, the structure valid."""
     for name, traj in trajectories.items():
         b = engines.create(backend)
-        b.reset(traj.positions[0], traj.scene.radii)
+        sizes = traj.scene.sizes  # radii, or the box scenes' half-extents
+        b.reset(traj.positions[0], **size_keyword(sizes))
         for f, frame in enumerate(traj.positions):
             b.update(frame)
             got = b.pairs()
             b.validate()
             n = traj.scene.n
-            assert np.array_equal(np.sort(keys(got, n)), keys(brute_pairs(frame, traj.scene.radii), n)), (name, f)
+            assert np.array_equal(np.sort(keys(got, n)), keys(brute_pairs(frame, sizes), n)), (name, f)
 
 
 def test_touching_lattices_touch_exactly():

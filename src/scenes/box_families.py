@@ -8,7 +8,8 @@ whose bodies rotate, so that their axis-aligned boxes change every frame.
   bottom: long statics spanning both axes among small movers.
 - `debris`: boxes of aspect 1:1 to 1:20 thrown out from the middle of a closed room under gravity,
   tumbling: long thin movers whose boxes change with every turn.
-- `brick_wall` (3D): a wall of bricks (2:1:1) on a static floor, knocked down by a heavy cube.
+- `brick_wall` (3D): walls of bricks (2:1:1, 15 wide and 16 high) on a static floor, each
+  knocked down by a heavy cube.
 - `beams` (3D): a hall of long static beams (10% of the objects, along x or y, at every height)
   with crates falling through, put back at the top once they fall out of its bottom.
 
@@ -35,6 +36,10 @@ WALLS_STATIC_SHARE, WALLS_LONGEST = 0.07, 40.0  # share of statics; longest wall
 DEBRIS_ASPECT = 20.0  # the thinnest debris is 20 times as long as it is thick
 BEAMS_STATIC_SHARE, BEAM_ASPECT = 0.1, 20.0
 BRICK = (2.0, 1.0, 1.0)  # a brick's proportions: length, depth, height
+# A wall is 15 bricks wide and 16 rows high: a scene of n bricks is as many such walls as it takes,
+# each with its own cube, so that recording stays linear in n (one wall of 4096 bricks took Bullet
+# minutes a step once it fell).
+WALL_COLUMNS, WALL_BRICKS, WALL_ROW_GAP = 15, 240, 48.0  # WALL_ROW_GAP: between rows of walls, in brick heights
 
 
 # ---- the layouts: box, statics and each object's own half-sizes, drawn before simulating -------
@@ -82,18 +87,33 @@ def debris_layout(n: int, rng: np.random.Generator, radii: tuple[float, float], 
     return {"halves": halves, "static": None, "box": (0.0, 0.0, width, width)}
 
 
+def _walls_of_bricks(n: int) -> tuple[int, int]:
+    """(walls, bricks): n slots are the floor, the bricks, and one cube per wall."""
+    walls = max(1, math.ceil((n - 1) / (WALL_BRICKS + 1)))
+    return walls, n - 1 - walls
+
+
+def _wall_places(walls: int, h: float) -> np.ndarray:
+    """The centres (x, y) of the walls' bases, on a grid: walls side by side along x, rows of them along y."""
+    width, depth = WALL_COLUMNS * 2 * BRICK[0] * h, WALL_ROW_GAP * h
+    cols = math.ceil(math.sqrt(walls))
+    k = np.arange(walls)
+    return np.column_stack([(k % cols) * (width + 8 * h), (k // cols) * depth])
+
+
 def brick_wall_layout(n: int, rng: np.random.Generator, radii: tuple[float, float], dim: int) -> dict:
     h = 0.5 * radii[1]
-    bricks = n - 2  # the floor (slot 0, static) and the cube thrown at the wall (the last slot)
-    cols = max(1, math.ceil(math.sqrt(bricks / 2.0)))  # a wall about twice as wide as high
-    rows = math.ceil(bricks / cols)
-    width, height = cols * 2 * BRICK[0] * h, rows * 2 * BRICK[2] * h
+    walls, _ = _walls_of_bricks(n)
+    places = _wall_places(walls, h)
+    width, height = WALL_COLUMNS * 2 * BRICK[0] * h, (WALL_BRICKS // WALL_COLUMNS) * 2 * BRICK[2] * h
+    lo = places.min(axis=0) - (0.5 * width + 8 * h, WALL_ROW_GAP * h)
+    hi = places.max(axis=0) + (0.5 * width + 8 * h, 8 * h)
     halves = np.tile(np.array(BRICK) * h, (n, 1))
-    halves[0] = (0.75 * width, 0.75 * width, 2 * h)  # the floor
-    halves[-1] = 4 * h  # the cube
+    halves[0] = (*(0.5 * (hi - lo)), 2 * h)  # the floor, static, under every wall
+    halves[n - walls:] = 4 * h  # the cubes
     static = np.arange(n) < 1
-    return {"halves": halves, "static": static, "box": (-0.75 * width, -0.75 * width, -4 * h, 0.75 * width,
-                                                        0.75 * width, height + 8 * h)}
+    return {"halves": halves, "static": static, "floor": (*(0.5 * (lo + hi)), -2 * h),
+            "box": (*lo, -4 * h, *hi, height + 8 * h)}
 
 
 def beams_layout(n: int, rng: np.random.Generator, radii: tuple[float, float], dim: int) -> dict:
@@ -251,20 +271,22 @@ def brick_wall(n, rng, radii, frames, lay):
     halves = lay["halves"]
     world = _World(GRAVITY)
     try:
-        bodies = [world.box((0.0, 0.0, -halves[0, 2]), halves[0])]
-        brick = halves[1]
-        bricks = n - 2
-        cols = max(1, math.ceil(math.sqrt(bricks / 2.0)))
-        for k in range(bricks):
-            row, col = divmod(k, cols)
-            x = (col - 0.5 * (cols - 1) + (0.5 if row % 2 else 0.0)) * 2 * brick[0]
-            bodies.append(world.box((x, 0.0, (2 * row + 1) * brick[2]), brick, mass=8 * float(np.prod(brick))))
-        cube = halves[-1]
-        rows = math.ceil(bricks / cols)
-        start = (0.0, -0.5 * lay["box"][4], rows * brick[2])
-        bodies.append(world.box(start, cube, mass=40 * float(np.prod(cube))))
-        speed = math.sqrt(GRAVITY * 2 * rows * brick[2])
-        world.call(world.p.resetBaseVelocity, bodies[-1], [0.0, 2.0 * speed, 0.0])
+        bodies = [world.box(lay["floor"], halves[0])]
+        brick, cube = halves[1], halves[-1]
+        walls, bricks = _walls_of_bricks(n)
+        places = _wall_places(walls, brick[2])
+        rows = WALL_BRICKS // WALL_COLUMNS
+        for k in range(bricks):  # each wall filled in turn, row on row, every other row half a brick over
+            wall, at = divmod(k, WALL_BRICKS)
+            row, col = divmod(at, WALL_COLUMNS)
+            x = places[wall, 0] + (col - 0.5 * (WALL_COLUMNS - 1) + (0.5 if row % 2 else 0.0)) * 2 * brick[0]
+            bodies.append(world.box((x, places[wall, 1], (2 * row + 1) * brick[2]), brick,
+                                    mass=8 * float(np.prod(brick))))
+        speed = 2.0 * math.sqrt(GRAVITY * 2 * rows * brick[2])
+        for wall in range(walls):  # each wall's cube, thrown at its middle from in front of it
+            start = (places[wall, 0], places[wall, 1] - 0.5 * WALL_ROW_GAP * brick[2], rows * brick[2])
+            bodies.append(world.box(start, cube, mass=40 * float(np.prod(cube))))
+            world.call(world.p.resetBaseVelocity, bodies[-1], [0.0, speed, 0.0])
         return _record_3d(world, bodies, halves, frames, 10, "brick wall")
     finally:
         world.close()

@@ -464,7 +464,7 @@ SCENE_FAMILIES: dict[str, SceneFamily] = {f.name: f for f in [
                 boxes={}, recipes={2: box_families.walls}, box_layouts={2: box_families.walls_layout}),
     SceneFamily("debris", "long thin boxes (aspect up to 1:20) tumbling: every box changes every frame",
                 boxes={}, recipes={2: box_families.debris}, box_layouts={2: box_families.debris_layout}),
-    SceneFamily("brick_wall", "a wall of bricks at rest, knocked down by a heavy cube",
+    SceneFamily("brick_wall", "walls of bricks at rest, each knocked down by a heavy cube",
                 boxes={}, recipes={3: box_families.brick_wall}, box_layouts={3: box_families.brick_wall_layout}),
     SceneFamily("beams", "long static beams at every height of a hall, crates falling through",
                 boxes={}, recipes={3: box_families.beams}, box_layouts={3: box_families.beams_layout}),

@@ -1,5 +1,6 @@
 """Scenes designed to break broad phases: exact ties, degenerate layouts, extreme coordinates,
-extreme sizes and fast movers, as circles or as spheres (`stress_scenes(dim)`). Each is seeded
+extreme sizes and fast movers, as circles or as spheres (`stress_scenes(dim)`), and boxes (walls
+across the world, a box as long as the world, boxes of zero width, aspect 1:1e6). Each is seeded
 and can be saved as a scene file.
 
 Touching lattices use radius 0.5 on integer coordinates, so x + r and x' - r meet exactly in
@@ -32,6 +33,46 @@ def _still(name: str, positions, radii, box=None, **meta) -> Scene:
         box = tuple((lo - 1.0).tolist() + (hi + 1.0).tolist())
     return Scene(positions, radii, np.zeros_like(positions), box=box, name=name, moves=False,
                  walls=False, responds=False, meta={"dist": "stress", **meta})
+
+
+def _still_boxes(name: str, positions: np.ndarray, extents: np.ndarray, box: tuple[float, ...]) -> Scene:
+    return Scene(positions, None, np.zeros_like(positions), box=box, name=name, moves=False, walls=False,
+                 responds=False, meta={"dist": "stress"}, extents=extents)
+
+
+def box_stress(kind: str, n: int = STRESS_N, seed: int = 0, dim: int = 2) -> Scene:
+    """Boxes built to break a broad phase, in the scene's box (side L): `walls_across`, movers of
+    half-extents 2 to 8 among 4 walls per axis spanning the world; `as_long_as_world`, one box as
+    long as the world among them; `zero_width`, boxes with no width on an axis (a third of them
+    points), in clusters so that they overlap; `aspect_1e6`, boxes 1e-4 thick and 100 long along a
+    random axis (aspect 1:1e6), crossing."""
+    box = _box(n, dim)
+    side = box[dim] - box[0]
+    rng = np.random.default_rng(seed)
+    positions = rng.uniform(box[0], box[dim], (n, dim))
+    extents = rng.uniform(2.0, 8.0, (n, dim))
+    if kind == "walls_across":
+        walls = 4 * dim
+        axis = np.repeat(np.arange(dim), 4)
+        extents[:walls] = 1.0
+        extents[np.arange(walls), axis] = 0.5 * side
+        positions[np.arange(walls), axis] = box[0] + 0.5 * side  # each spans its axis end to end
+    elif kind == "as_long_as_world":
+        extents[0] = 1.0
+        extents[0, 0], positions[0, 0] = 0.5 * side, box[0] + 0.5 * side
+    elif kind == "zero_width":
+        positions = generate("clusters", n, radius=1.0, seed=seed, box=box, dim=dim).positions
+        extents[np.arange(n), rng.integers(0, dim, n)] = 0.0
+        extents[rng.random(n) < 1.0 / 3.0] = 0.0
+    elif kind == "aspect_1e6":
+        extents[:] = 1e-4
+        extents[np.arange(n), rng.integers(0, dim, n)] = 100.0
+    else:
+        raise ValueError(kind)
+    return _still_boxes(f"boxes_{kind}", positions, extents, box)
+
+
+BOX_STRESS = ("walls_across", "as_long_as_world", "zero_width", "aspect_1e6")
 
 
 def _box(n: int, dim: int) -> tuple[float, ...]:
@@ -136,6 +177,7 @@ def stress_scenes(dim: int = 2) -> dict[str, Callable[[], Scene]]:
         "n_1": lambda: small(1, dim=dim),
         "n_2": lambda: small(2, dim=dim),
     })
+    scenes.update({f"boxes_{kind}": lambda kind=kind: box_stress(kind, dim=dim) for kind in BOX_STRESS})
     return scenes
 
 
