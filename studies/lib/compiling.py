@@ -4,8 +4,9 @@ kernels before a job's clock starts, and any compilation left for the timed run 
 Without it a backend's first build in a fresh cache paid its compilation (own.grid_incremental's:
 19.7 s on a loaded machine, 0.06 s once cached) and a study skipped it as too slow to build. The
 warm-up runs the backend on small scenes that take its structured path: a sample of the job's own
-first frames (its radii, statics and spawning) and uniform moving scenes with equal and with
-mixed radii, each for a few frames, so that its build, update and pair kernels all compile.
+first frames (its radii or boxes, statics and spawning; boxes turning) and uniform moving scenes
+with equal and with mixed radii, each for a few frames, so that its build, update and pair kernels
+all compile.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import numpy as np
 from numba.core import event
 
 import engines
+from interface.base import size_keyword
 
 WARM_N = 256  # objects: past every small-scene path of ours (own/small.py: 64), well under a ms a frame
 WARM_FRAMES = 3
@@ -54,9 +56,11 @@ def compiles(backend: str) -> bool:
     return engines.family(backend).kind == "own"
 
 
-def _frames(positions: np.ndarray, radii: np.ndarray, static, alive, rng) -> list[tuple]:
-    """(positions, alive) of WARM_FRAMES frames moving from `positions`, the statics still."""
-    velocities = rng.normal(0.0, 0.05, positions.shape) * max(float(radii.mean()) if len(radii) else 1.0, 1e-9)
+def _frames(positions: np.ndarray, sizes: np.ndarray, static, alive, rng) -> list[tuple]:
+    """(positions, alive, extents) of WARM_FRAMES frames moving from `positions`, the statics
+    still; boxes (sizes (n, d)) turning as they go (their extents grow a little each frame, the
+    statics' never), balls with extents None."""
+    velocities = rng.normal(0.0, 0.05, positions.shape) * max(float(sizes.mean()) if len(sizes) else 1.0, 1e-9)
     if static is not None:
         velocities[static] = 0.0
     frames = []
@@ -66,7 +70,11 @@ def _frames(positions: np.ndarray, radii: np.ndarray, static, alive, rng) -> lis
             toggle = np.zeros(len(alive), dtype=bool)
             toggle[f::WARM_FRAMES] = True
             flipped = alive ^ (toggle if static is None else toggle & ~static)
-        frames.append((positions + (f + 1) * velocities, flipped))
+        extents = None
+        if sizes.ndim == 2:
+            extents = sizes.copy()
+            extents[slice(None) if static is None else ~static] *= 1.0 + 0.01 * (f + 1)
+        frames.append((positions + (f + 1) * velocities, flipped, extents))
     return frames
 
 
@@ -82,11 +90,12 @@ def warm_scenes(dim: int, sample: tuple | None) -> list[tuple]:
     return scenes
 
 
-def sample_of(positions: np.ndarray, radii: np.ndarray, static, alive) -> tuple:
-    """At most WARM_N of the job's objects, evenly spaced in id, with their masks."""
-    pick = np.linspace(0, len(radii) - 1, min(len(radii), WARM_N)).astype(np.int64) if len(radii) else slice(0, 0)
-    return (np.ascontiguousarray(positions[pick]), radii[pick], None if static is None else static[pick],
-            None if alive is None else alive[pick])
+def sample_of(positions: np.ndarray, sizes: np.ndarray, static, alive) -> tuple:
+    """At most WARM_N of the job's objects, evenly spaced in id, with their sizes (radii, or boxes'
+    half-extents: a job over boxes compiles the kernels for boxes) and masks."""
+    pick = np.linspace(0, len(sizes) - 1, min(len(sizes), WARM_N)).astype(np.int64) if len(sizes) else slice(0, 0)
+    return (np.ascontiguousarray(positions[pick]), np.ascontiguousarray(sizes[pick]),
+            None if static is None else static[pick], None if alive is None else alive[pick])
 
 
 def warm_up(backend: str, params: dict[str, Any], dim: int, sample: tuple | None = None) -> float:
@@ -97,14 +106,14 @@ def warm_up(backend: str, params: dict[str, Any], dim: int, sample: tuple | None
         return 0.0
     start = time.perf_counter()
     rng = np.random.default_rng(1)
-    for positions, radii, static, alive in warm_scenes(dim, sample):
+    for positions, sizes, static, alive in warm_scenes(dim, sample):
         try:
             b = engines.create(backend, **params)
             try:
-                b.reset(positions, radii, static=static, alive=alive)
+                b.reset(positions, **size_keyword(sizes), static=static, alive=alive)
                 b.pairs()
-                for moved, now_alive in _frames(positions, radii, static, alive, rng):
-                    b.update(moved, now_alive)
+                for moved, now_alive, extents in _frames(positions, sizes, static, alive, rng):
+                    b.update(moved, now_alive, extents=extents)
                     b.pairs()
             finally:
                 b.close()

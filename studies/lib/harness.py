@@ -257,7 +257,7 @@ def _child(job: Job, traj: Trajectory, conn, parent_pid: int, scratch: str) -> N
     try:
         with CompileClock() as clock:
             # Before the job's clock starts (the parent's limits count from "compiled").
-            sample = sample_of(traj.positions[0], traj.scene.radii, traj.scene.static, traj.alive_at(0))
+            sample = sample_of(traj.positions[0], traj.sizes_at(0), traj.scene.static, traj.alive_at(0))
             compiled_s = warm_up(job.backend, job.params, traj.scene.dim, sample)
             conn.send(("compiled", None))
             for r in range(job.repeats):
