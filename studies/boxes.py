@@ -151,7 +151,8 @@ def report(folder: Path, report_to: Path) -> int:
         lines += ["**Interrupted run**: these are the rows so far.", ""]
     lines += ["## Summary (update + pairs, on the boxes)", "",
               "| family | n | our fastest | ms | fastest engine | ms | engine / ours | structured own over "
-              f"{WITHIN:g}x | own that missed | circle model: candidates per box pair |", "|---|---|---|---|---|---|---|---|---|---|"]
+              f"{WITHIN:g}x | own that missed | circle model: candidates per box pair |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
     summary_rows = []
     for (family, n), table in by_family.items():
         v = verdict(table)
@@ -171,7 +172,8 @@ def report(folder: Path, report_to: Path) -> int:
                  and abs(table.loc[b, "circles_rank"] - ranked.index(b) - 1) >= 3]
         dim = BOX_FAMILIES.get(family, "?")
         lines += ["", f"## {family} ({dim}D), n = {n}: {SCENE_FAMILIES[family].trait}", "",
-                  f"Rank changes against the circle model (top 8, moves of 3 places or more): {', '.join(moved) or 'none'}.",
+                  "Rank changes against the circle model (top 8, moves of 3 places or more): "
+                  f"{', '.join(moved) or 'none'}.",
                   "", "| rank | backend | broad ms | per box pair | missed | as circles ms | as circles per box pair | "
                   "status |", "|---|---|---|---|---|---|---|---|"]
         for k, (name, r) in enumerate(table.iterrows(), 1):

@@ -5,7 +5,7 @@ box-overlap set itself, each circle is given a square sensor shape of side 2r by
 collision test is exactly the box test; `shape="circle"` uses circle shapes instead (then only
 truly overlapping circles come back). Boxes are box polygons of their extents (a cpBB in the
 index, the polygons' collision their overlap); a box that changes its extents as its body rotates
-gets its polygon's new vertices in place, as a project's own rotating body would. Bodies are kinematic, moved with pymunk's batch API;
+gets its polygon's new vertices in place. Bodies are kinematic, moved with pymunk's batch API;
 `pairs()` runs `space.step` (index update, pair search, shape collision; sensors skip the
 solver) and reads the arbiters in one batch call. Statics and spawning natively: a static object
 is a shape on a static body, in the space's static index (never re-indexed, never paired with

@@ -133,18 +133,18 @@ def box_traits(extents: np.ndarray) -> dict:
             "longest": float(longest_side.max() / median), "aspect": aspect}
 
 
-def _coverage(traj: Trajectory, pos: np.ndarray, radii: np.ndarray) -> tuple[float, bool]:
+def _coverage(traj: Trajectory, pos: np.ndarray, sizes: np.ndarray) -> tuple[float, bool]:
     """(coverage, whether over the occupied box): a generated scene's objects over its box; a
-    recorded scene's objects alive in its fullest frame (`pos`, `radii`) over the box they
+    recorded scene's objects alive in its fullest frame (`pos`, `sizes`) over the box they
     occupy there (its file's box spans every frame, and its slots include objects not yet
     spawned or gone)."""
     if traj.scene.motion is None:
         return coverage(traj.scene.sizes, traj.scene.box), False
-    if not len(radii):
+    if not len(sizes):
         return 0.0, True
-    halves = radii[:, None] if radii.ndim == 1 else radii
+    halves = sizes[:, None] if sizes.ndim == 1 else sizes
     box = tuple((pos - halves).min(axis=0)) + tuple((pos + halves).max(axis=0))
-    return coverage(radii, box), True
+    return coverage(sizes, box), True
 
 
 def covering_words(share: float, occupied: bool, dim: int) -> str:
