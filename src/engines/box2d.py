@@ -148,8 +148,7 @@ class Box2DV3(BroadPhase):
 
     def _reshape(self, positions):
         """Boxes took new extents (bodies rotated): each changed shape gets its new box polygon."""
-        changed = np.flatnonzero((self._all_radii != self.radii).any(axis=1))
-        self.radii = self._all_radii
+        changed = self._take_new_extents()
         for i, (hx, hy) in zip(changed.tolist(), self.radii[changed].tolist()):
             self._shapes[i].cast().polygon = pyb2d3.box(hx, hy)
         self._update(positions)

@@ -142,8 +142,7 @@ class _Chipmunk(BroadPhase):
     def _reshape(self, positions):
         """Boxes took new extents (bodies rotated): each changed polygon gets its new vertices in
         place (Chipmunk reindexes its box at the next step); statics keep theirs (the interface checks)."""
-        changed = np.flatnonzero((self._all_radii != self.radii).any(axis=1))
-        self.radii = self._all_radii
+        changed = self._take_new_extents()
         for i, (hx, hy) in zip(changed.tolist(), self.radii[changed].tolist()):
             self._items[i][1].unsafe_set_vertices([(-hx, -hy), (hx, -hy), (hx, hy), (-hx, hy)])
         self._update(positions)

@@ -92,8 +92,7 @@ class RapierBvh(BroadPhase):
 
     def _reshape(self, positions):
         """Boxes took new extents (bodies rotated): each changed collider gets its new cuboid."""
-        changed = np.flatnonzero((self._all_radii != self.radii).any(axis=1))
-        self.radii = self._all_radii
+        changed = self._take_new_extents()
         colliders = self._colliders
         for k, halves in zip(changed.tolist(), halves_in_3d(self.radii[changed]).tolist()):
             if self._handles[k] is not None:

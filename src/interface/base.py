@@ -374,6 +374,13 @@ class BroadPhase(ABC):
         else:
             self._rebuild(positions)
 
+    def _take_new_extents(self) -> np.ndarray:
+        """For a backend whose `_reshape` changes its shapes in place (over every object: the
+        "native" lifecycle): the new extents taken into `radii`; the objects whose extents changed."""
+        changed = np.flatnonzero((self._all_radii != self.radii).any(axis=1))
+        self.radii = self._all_radii
+        return changed
+
     def _check_statics(self, positions: np.ndarray, alive: np.ndarray | None) -> None:
         """A static object alive now must be where it was at reset: every backend builds its
         statics once (a static that moved was silently missed by most of them)."""
