@@ -6,7 +6,14 @@ half-extents (2D boxes as deep as they are wide, at z = 0) (mass 1, no gravity, 
 with `resetBasePositionAndOrientation` (there is no batch setter), and `pairs()` runs
 `performCollisionDetection` and reads `getContactPoints`. Bullet keeps contacts up to its
 contact breaking threshold (0.02 units) apart, and its tree uses fattened boxes: such pairs
-come back as false positives, not errors. Statics and spawning natively: a static object is a
+come back as false positives, not errors.
+
+pybullet 3.2.7 hands back at most 47,662 contact points in one `getContactPoints` call: above it
+the list comes back padded with garbage ids, and from about 63,000 the call crashes the process
+(measured: a lattice of overlapping boxes, up to four contact points a pair). So the list is read
+in one call only while the last frame's count was under half that; otherwise (and on the first
+frame after a reset, or one that spawned many objects) it is read body by body, each mover's
+contacts on their own: slower (each call scans every contact manifold), never corrupt. Statics and spawning natively: a static object is a
 body of mass 0 (Bullet's static set, never moved, never paired with another static), an object
 that appears or goes is a body created or removed.
 """
@@ -22,6 +29,9 @@ with native_output_silenced():  # pybullet prints its build time from C on impor
 
 from interface.base import BroadPhase, Limits, halves_in_3d, in_3d
 from interface.pairs import canonical
+
+CONTACTS_IN_ONE_CALL = 47_662  # pybullet's most contact points in one reply; more come back corrupt
+BULK_BELOW = CONTACTS_IN_ONE_CALL // 2  # read in one call while the last frame had fewer than this
 
 
 class _Bullet(BroadPhase):
@@ -49,6 +59,7 @@ class _Bullet(BroadPhase):
         if self.n and radii.ndim == 1 and radii.min() == 0.0:  # a box of zero width it creates (and misses: tests)
             raise ValueError(f"{self.name}: Bullet cannot create a sphere of radius 0 (object {int(radii.argmin())})")
         self._call(pybullet.resetSimulation, self.reset_flags)
+        self._last_points = None  # the last frame's contact points; None until a frame is read
         self._call(pybullet.setGravity, 0.0, 0.0, 0.0)
         self._shapes: dict[tuple, int] = {}  # one collision shape per distinct size, shared
         self._static = self.static if self.static is not None else np.zeros(self.n, dtype=bool)
@@ -93,19 +104,38 @@ class _Bullet(BroadPhase):
             for k in self.spawned.tolist():
                 self._create(k, in_3d(positions[k:k + 1])[0].tolist())
             self._find_movers()
+            if len(self.spawned) > len(self._mover_ids) // 4:  # a burst may multiply the contacts
+                self._last_points = None
         reset, client, still = pybullet.resetBasePositionAndOrientation, self._client, (0.0, 0.0, 0.0, 1.0)
         for uid, xyz in zip(self._mover_ids, in_3d(positions[self._movers]).tolist()):
             reset(uid, xyz, still, physicsClientId=client)
 
     def _pairs(self):
         self._call(pybullet.performCollisionDetection)
-        points = self._call(pybullet.getContactPoints)
+        points = None
+        if self._last_points is not None and self._last_points < BULK_BELOW:
+            points = self._call(pybullet.getContactPoints)
+            if len(points) >= CONTACTS_IN_ONE_CALL:  # grew past the reply in one frame: read again
+                points = None
+        self._stats = {"contact_points": len(points), "read": "in one call"} if points is not None else \
+            {"read": "body by body"}
+        if points is None:
+            points = self._contacts_body_by_body()
+        self._last_points = len(points)  # a pair of movers counted twice here: on the safe side
         if not points:
             return canonical([], [])
         a = np.fromiter((p[1] for p in points), dtype=np.int64, count=len(points))
         b = np.fromiter((p[2] for p in points), dtype=np.int64, count=len(points))
-        self._stats = {"contact_points": len(points)}
         return canonical(self._index[a], self._index[b])
+
+    def _contacts_body_by_body(self) -> list:
+        """Every contact, read a mover at a time (each contact has a mover: statics never pair);
+        a contact between two movers comes twice, and `canonical` drops the repeat."""
+        read, client = pybullet.getContactPoints, self._client
+        points: list = []
+        for uid in self._mover_ids:
+            points.extend(read(bodyA=uid, physicsClientId=client))
+        return points
 
     def close(self):
         if self._client is not None and self._client >= 0:
