@@ -50,6 +50,13 @@ MAX_CELLS_PER_OBJECT = 8
 # The default cell is one diameter of the largest radius of at most this many median radii, so
 # that a few huge objects go to the large bucket instead of coarsening the whole grid.
 LARGE_RADIUS_IN_MEDIANS = 4.0
+# Boxes spread wider than balls (a pile of debris of aspect 1 to 20, a wall of bricks and the
+# cube that knocks it over), and a long box costs less in the large bucket than a ball as long
+# (its area is smaller): their cell is the widest box under 1.9 median longest sides, so that a
+# box twice the median (the cube of side 32 among bricks 16 long) is large. Over the box families
+# at n = 4096 (grid ms a frame, 4 medians -> 1.9): brick wall 1.75 -> 1.07 (the cube had set
+# cells of 32), debris 1.35 -> 1.04; walls, pyramid and beams the same within noise.
+LARGE_BOX_IN_MEDIANS = 1.9
 # Margin of the small-object limit, in ulps of the largest coordinate involved (a few suffice:
 # the cell index and the box bounds each round once or twice).
 ROUNDING_ULPS = 64
@@ -723,17 +730,25 @@ def cell_keys(positions: np.ndarray, layout: np.ndarray) -> np.ndarray:
     return 1 + (cell + pad) @ np.array(key_strides(layout, d))
 
 
-def default_cell(radii: np.ndarray) -> float:
-    """One diameter of the largest radius of at most LARGE_RADIUS_IN_MEDIANS median radii: the
-    objects above it go to the large bucket and leave the cells sized to the others. (Capping the
-    diameter at the bound instead made a heavy ball of 10x among radii 4 to 8 coarsen every cell
-    to 48 where the diameters are 16: 158955 tests a frame for 327 candidates, 0.137 ms at
-    n = 4096, against 0.03 ms with cells of 16.)"""
-    if len(radii) == 0:
+def default_cell(sizes: np.ndarray) -> float:
+    """Circles: one diameter of the largest radius of at most LARGE_RADIUS_IN_MEDIANS median radii:
+    the objects above it go to the large bucket and leave the cells sized to the others. (Capping
+    the diameter at the bound instead made a heavy ball of 10x among radii 4 to 8 coarsen every
+    cell to 48 where the diameters are 16: 158955 tests a frame for 327 candidates, 0.137 ms at
+    n = 4096, against 0.03 ms with cells of 16.) Boxes: as wide as the widest box under
+    LARGE_BOX_IN_MEDIANS median longest sides (objects not alive, NaN, left out)."""
+    if len(sizes) == 0:
         return 0.0
-    radii = widest_halves(radii)  # a box counts as wide as its longest side
-    bound = LARGE_RADIUS_IN_MEDIANS * float(np.median(radii))
-    return 2.0 * float(radii[radii <= bound].max())
+    if sizes.ndim == 1:
+        bound = LARGE_RADIUS_IN_MEDIANS * float(np.median(sizes))
+        return 2.0 * float(sizes[sizes <= bound].max())
+    widest = widest_halves(sizes)  # a box counts as wide as its longest side
+    widest = widest[np.isfinite(widest)]
+    if len(widest) == 0:
+        return 0.0
+    bound = LARGE_BOX_IN_MEDIANS * float(np.median(widest))
+    below = widest[widest < bound]
+    return 2.0 * float(below.max() if len(below) else widest.min())
 
 
 # The cell sizes a tuning sweep tries, as multiples of the default cell (docs/TUNING.md).
@@ -770,11 +785,16 @@ class CellLayout(SmallScenes, BroadPhase):
         if cell is not None and not (np.isfinite(cell) and cell > 0):
             raise ValueError(f"{self.name}: cell must be a positive finite size, got {shown(cell)}")
 
-    def _start_layout(self, radii):
+    def _start_layout(self, radii, movers=None):
         """The cell size, p and cell cap for these objects, no layout yet, and the one radius of
-        them all where the kernels can take it instead of the radii (`specialise`)."""
-        self._cell = float(self.params["cell"]) if self.params["cell"] is not None else default_cell(radii)
-        # Boxes: sized as balls by their longest half-extent here, where a cell is chosen.
+        them all where the kernels can take it instead of the radii (`specialise`); `movers`: a
+        mask of the objects that size the cells, where statics are among `radii`."""
+        if self.params["cell"] is not None:
+            self._cell = float(self.params["cell"])
+        elif radii.ndim == 2:  # boxes: the movers alive decide (statics are held apart, in cells of their own)
+            self._cell = default_cell(radii if movers is None else radii[movers])
+        else:
+            self._cell = default_cell(radii)
         self._p = int(self.params["p"] or 0)
         self._max_cells = MAX_CELLS_PER_OBJECT * self.n + CELLS_ROOM[self.dim]
         self._layout = np.zeros(3 * self.dim)
@@ -832,7 +852,8 @@ class SquareGrid(CellLayout):
             raise ValueError(f"{self.name}: vector scans circles only (spheres are scanned one at a time)")
         self._dim = marker(self.dim)
         self._vector_now = self._vector and self.dim == 2 and self.shape == "balls"
-        self._start_layout(radii)
+        movers = None if self.static is None else ~self.static
+        self._start_layout(radii, movers if self.alive is None or movers is None else movers & self.alive)
         n = self.n
         # Slot arrays (ids, centres, keys, radii), double-buffered: the build reads last frame's
         # while it writes this frame's. Work arrays are kept from frame to frame. Slots hold

@@ -335,6 +335,7 @@ class IncrementalGrid(StaticsApart, CellLayout):
         self._plain: UniformGrid | None = None  # the plain search, while kept candidates do not pay
         self._collect_large = PairCollector()
         self._large = False  # whether any object is large (known at each rebuild: it forces one)
+        self._new_shapes = False  # whether this frame's boxes took new extents (then the frame is not quiet)
 
     def _may_search_plain(self) -> bool:
         return self.params["candidates"] == "auto"
@@ -387,6 +388,26 @@ class IncrementalGrid(StaticsApart, CellLayout):
         else:
             self._kept_update(positions, chosen=False)
 
+    def _reshape(self, positions):
+        """Boxes took new extents (bodies rotated): every kept candidate may change, so the frame is
+        searched as own.grid does, its cells taking the new extents in place (a rebuild of the kept
+        candidates each frame cost 1.5x an own.grid frame on the turning box families); kept
+        candidates come back once shapes and cells stay put. `candidates="kept"`, or objects that
+        came or went: built anew."""
+        if len(self.spawned) or len(self.removed) or not self._may_search_plain():
+            super()._reshape(positions)
+            return
+        ids = self._alive_ids
+        self.radii = self._all_radii if ids is None else self._all_radii[ids]
+        if ids is not None:
+            self._held_positions = positions = np.ascontiguousarray(positions[ids])
+        self._switch, self._new_shapes = False, True
+        if self._plain is None:
+            self._search_plain(positions)
+        else:
+            self._plain._all_radii = self.radii
+            self._plain._reshape(positions)
+
     def _kept_update(self, positions, chosen: bool):
         """This frame's kept candidates; `chosen`: a rebuild here is the backend's own choice (a
         reset, or back from the plain search), not one forced by the scene."""
@@ -433,7 +454,8 @@ class IncrementalGrid(StaticsApart, CellLayout):
             out = self._plain._pairs()
             counters = self._plain._counters
             quiet = (counters["tests"] <= KEEP_FROM_TESTS_PER_OBJECT[self.dim] * self.n
-                     and counters["moved"] <= self.n // (2 * REBUILD_MOVERS_DIVISOR))
+                     and counters["moved"] <= self.n // (2 * REBUILD_MOVERS_DIVISOR) and not self._new_shapes)
+            self._new_shapes = False
             self._quiet = self._quiet + 1 if quiet else 0
             self._switch = self._quiet >= KEEP_AFTER_QUIET_FRAMES
             return out

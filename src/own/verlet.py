@@ -106,6 +106,11 @@ class VerletList(StaticsApart, BroadPhase):
             self._skin = 0.0  # radii near the largest double leave no room for a skin (exact without one)
         if self._built_skin == self._skin and self._grid_sizes is self._radii:
             self._grid.update(positions)
+        elif self._built_skin == self._skin and self._radii.ndim == 2:
+            # Boxes that turned: the grid takes their fat boxes in place, its cells kept (built
+            # anew each frame, the debris at n = 4096 took 2.0 ms a frame, own.grid's 1.4).
+            self._grid.update(positions, extents=self._radii + 0.5 * self._skin)
+            self._grid_sizes = self._radii
         else:
             self._grid.reset(positions, **size_keyword(self._radii + 0.5 * self._skin))
             self._built_skin, self._grid_sizes = self._skin, self._radii
