@@ -13,9 +13,11 @@ the list comes back padded with garbage ids, and from about 63,000 the call cras
 (measured: a lattice of overlapping boxes, up to four contact points a pair). So the list is read
 in one call only while the last frame's count was under half that; otherwise (and on the first
 frame after a reset, or one that spawned many objects) it is read body by body, each mover's
-contacts on their own: slower (each call scans every contact manifold), never corrupt. Statics and spawning natively: a static object is a
-body of mass 0 (Bullet's static set, never moved, never paired with another static), an object
-that appears or goes is a body created or removed.
+contacts on their own: slower (each call scans every contact manifold), never corrupt.
+
+Statics and spawning natively: a static object is a body of mass 0 (Bullet's static set, never
+moved, never paired with another static), an object that appears or goes is a body created or
+removed.
 """
 
 from __future__ import annotations
