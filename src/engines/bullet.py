@@ -114,15 +114,13 @@ class _Bullet(BroadPhase):
 
     def _pairs(self):
         self._call(pybullet.performCollisionDetection)
-        points = None
-        if self._last_points is not None and self._last_points < BULK_BELOW:
-            points = self._call(pybullet.getContactPoints)
-            if len(points) >= CONTACTS_IN_ONE_CALL:  # grew past the reply in one frame: read again
-                points = None
-        self._stats = {"contact_points": len(points), "read": "in one call"} if points is not None else \
-            {"read": "body by body"}
-        if points is None:
+        bulk = self._last_points is not None and self._last_points < BULK_BELOW
+        points = self._call(pybullet.getContactPoints) if bulk else None
+        if points is not None and len(points) < CONTACTS_IN_ONE_CALL:
+            self._stats = {"contact_points": len(points), "read": "in one call"}
+        else:  # the first frame, a crowded one, or one that grew past the reply: read again
             points = self._contacts_body_by_body()
+            self._stats = {"read": "body by body"}
         self._last_points = len(points)  # a pair of movers counted twice here: on the safe side
         if not points:
             return canonical([], [])

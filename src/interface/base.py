@@ -362,17 +362,22 @@ class BroadPhase(ABC):
         came or went, its `_update` takes the new sizes in `radii` as a move; otherwise built anew
         for them, as at a reset (a backend that can refit its structure in place overrides this)."""
         if self.resizes and not (len(self.spawned) or len(self.removed)):
-            ids = self._alive_ids
-            self.radii = self._all_radii if ids is None else self._all_radii[ids]
-            if ids is not None:
-                self._held_positions = positions = np.ascontiguousarray(positions[ids])
-            self._update(positions)
+            self._update(self._held_with_new_extents(positions))
             return
         if self._alive_ids is None and (self._native_lifecycle() or (self.static is None and self.alive is None)):
             self.radii = self._all_radii
             self._reset(positions, self.radii)
         else:
             self._rebuild(positions)
+
+    def _held_with_new_extents(self, positions: np.ndarray) -> np.ndarray:
+        """For a backend that takes new extents without a rebuild, no object having come or gone:
+        the new extents taken into `radii`, over the objects it holds, and their positions."""
+        ids = self._alive_ids
+        self.radii = self._all_radii if ids is None else self._all_radii[ids]
+        if ids is not None:
+            self._held_positions = positions = np.ascontiguousarray(positions[ids])
+        return positions
 
     def _take_new_extents(self) -> np.ndarray:
         """For a backend whose `_reshape` changes its shapes in place (over every object: the

@@ -397,10 +397,7 @@ class IncrementalGrid(StaticsApart, CellLayout):
         if len(self.spawned) or len(self.removed) or not self._may_search_plain():
             super()._reshape(positions)
             return
-        ids = self._alive_ids
-        self.radii = self._all_radii if ids is None else self._all_radii[ids]
-        if ids is not None:
-            self._held_positions = positions = np.ascontiguousarray(positions[ids])
+        positions = self._held_with_new_extents(positions)
         self._switch, self._new_shapes = False, True
         if self._plain is None:
             self._search_plain(positions)
