@@ -15,7 +15,9 @@ from hypothesis import strategies as st
 
 import engines
 from own.brute import brute_pairs
+from own.dimension import marker
 from own.grid import grid_box_pairs
+from own.large_cover import COVER_FROM, pairs_among_covered
 from own.reference import BRUTE_FORCE_LIMIT, box_pairs, narrow_phase
 from own.static_boxes import StaticBoxCells
 from scenes.broadmark import write_aabbs
@@ -219,6 +221,57 @@ def test_the_reference_past_brute_force_is_exact_on_boxes(dim):
     assert as_set(grid_box_pairs(positions, extents)) == as_set(brute_pairs(positions, extents))
 
 
+@st.composite
+def spread_sizes(draw, dim: int):
+    """Boxes (or balls) whose sizes spread over two decades, as debris of aspect 1 to 20 does:
+    many too large for a grid's cells, some on a lattice (shared edges), some of zero width."""
+    n = draw(st.integers(0, 500))
+    rng = np.random.default_rng(draw(st.integers(0, 2**31 - 1)))
+    positions = rng.uniform(0, draw(st.sampled_from([100.0, 600.0, 3000.0])), (n, dim))
+    sizes = rng.uniform(1, 4, (n, dim)) * np.exp(rng.uniform(0, np.log(40), (n, 1)))
+    if draw(st.booleans()):
+        positions = np.round(positions / 8.0) * 8.0
+        sizes = np.round(sizes)
+    sizes[rng.random((n, dim)) < 0.05] = 0.0
+    return positions + draw(st.sampled_from([0.0, -1e4])), sizes if draw(st.booleans()) else sizes[:, 0]
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@settings(max_examples=60, deadline=None)
+@given(data=st.data())
+def test_many_large_objects_pair_through_the_cells_they_cover(dim, data):
+    """The grids' large bucket where it holds many (large_cover.py): its pairs exactly, each once."""
+    positions, sizes = data.draw(spread_sizes(dim))
+    ids = np.arange(len(positions)) * 3 + 7  # objects' ids are not their rows
+    buf = np.empty((len(positions) ** 2 // 2 + 8, 2), dtype=np.int64)
+    found, tests = pairs_among_covered(positions, sizes, ids, buf, 0, 0, marker(dim))
+    if found < 0:  # no cells to lay: the grids sweep these instead
+        assert not sizes.any()
+        return
+    assert tests >= found
+    assert len(as_set(buf[:found])) == found
+    assert as_set(buf[:found]) == as_set(ids[brute_pairs(positions, sizes)])
+
+
+@pytest.mark.parametrize("name", ["own.grid", "own.grid_incremental", "own.grid_parallel", "own.verlet"])
+@pytest.mark.parametrize("dim", [2, 3])
+def test_the_grids_take_many_large_boxes_through_the_cells_they_cover(name, dim):
+    rng = np.random.default_rng(dim)
+    n = 3000
+    positions = rng.uniform(0, 1500 if dim == 2 else 200, (n, dim))
+    extents = rng.uniform(1, 4, (n, dim)) * np.exp(rng.uniform(0, np.log(30), (n, 1)))
+    backend = engines.create(name)
+    backend.reset(positions, extents=extents)
+    for frame in range(3):
+        positions = positions + rng.normal(0, 1, (n, dim))
+        extents = extents * rng.uniform(0.9, 1.1, (n, dim))
+        backend.update(positions, extents=extents)
+        got = backend.pairs()
+        assert len(as_set(got)) == len(got) and as_set(got) == as_set(box_pairs(positions, extents)), f"frame {frame}"
+    if name == "own.grid":
+        assert backend.stats()["large"] >= COVER_FROM  # the cells, not the sweep, paired them
+
+
 RELIABLE_ON_BOXES = [n for n in BOX_BACKENDS if n not in UNRELIABLE_ON_BOXES]
 
 
@@ -294,12 +347,14 @@ def test_a_box_backend_follows_boxes_that_move_rotate_spawn_and_go(name, params,
 RESIZING = [n for n in OWN_EXACT_BOXES if engines.backend_class(n).resizes]
 # The grids take new extents in place too: own.grid's slots take them (a box grown past a cell
 # changes bucket), and the grids that keep candidates search as own.grid does while boxes turn.
-IN_PLACE = RESIZING + ["own.grid", "own.grid_incremental", "own.grid_parallel"]
+# own.grid_parallel with parallel_from 0: split over the cores however small, where it takes the plain search too.
+IN_PLACE = [*[(n, {}) for n in [*RESIZING, "own.grid", "own.grid_incremental", "own.grid_parallel"]],
+            ("own.grid_parallel", {"parallel_from": 0})]
 
 
-@pytest.mark.parametrize("name", IN_PLACE)
+@pytest.mark.parametrize(("name", "params"), IN_PLACE)
 @pytest.mark.parametrize("dim", [2, 3])
-def test_boxes_that_turn_a_little_are_taken_in_place_and_stay_exact(name, dim):
+def test_boxes_that_turn_a_little_are_taken_in_place_and_stay_exact(name, params, dim):
     """A structure kept with a skin takes new extents like a move (a side that grew moved out),
     a grid in its slots: boxes turning a little every frame, as a settling stack's do, are not
     built anew each frame, and every frame stays exact."""
@@ -309,7 +364,7 @@ def test_boxes_that_turn_a_little_are_taken_in_place_and_stay_exact(name, dim):
     positions = rng.uniform(0, 200, (n, dim))
     extents = rng.uniform(1, 4, (n, dim))
     static = np.arange(n) < 40
-    backend = engines.create(name)
+    backend = engines.create(name, **params)
     backend.reset(positions, extents=extents, static=static)
     resets, reset = [], backend._reset
     backend._reset = lambda *args: (resets.append(1), reset(*args))  # a build from scratch

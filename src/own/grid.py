@@ -38,6 +38,7 @@ from .common import (PairCollector, cell_of, centre_extents, copy_size, emit, ha
                      row_of, set_halves, widest_half, widest_halves)
 from .compress import NATIVE, SLACK_ROWS, scan_compressed
 from .dimension import marker
+from .large_cover import COVER_FROM, pairs_among_covered
 from .small import SmallScenes
 from .static_boxes import StaticBoxCells
 
@@ -577,8 +578,14 @@ def _scan_statics(centre, r, i, s, e, s_objects, s_centres, s_radii, buf, count,
 
 @nb.njit(cache=True)
 def large_against_large(centres, sradii, ids, first_large, end, buf, count, tests, dim):
-    """Pairs among slots first_large..end-1 (the large bucket): a sweep along x, each candidate
-    tested as a scan of one slot. Returns (pairs found, pair tests), counting on from the given ones."""
+    """Pairs among slots first_large..end-1 (the large bucket): where they are many, through the
+    cells they cover (large_cover.py); else a sweep along x, each candidate tested as a scan of
+    one slot. Returns (pairs found, pair tests), counting on from the given ones."""
+    if end - first_large >= COVER_FROM:
+        found, covered_tests = pairs_among_covered(centres[first_large:end], sradii[first_large:end],
+                                                   ids[first_large:end], buf, count, tests, dim)
+        if found >= 0:
+            return found, covered_tests
     lx = np.empty(end - first_large)
     for a in range(first_large, end):
         lx[a - first_large] = centres[a, 0] - half_of(sradii, a, 0)

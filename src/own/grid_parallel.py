@@ -213,8 +213,9 @@ def chunked_pairs(state, radius, cand, counts, hits, found, dim, buf):
 class ParallelIncrementalGrid(IncrementalGrid):
     """own.grid_incremental with each frame split over every core (see the module's docstring),
     from `parallel_from` objects on; below that, one thread exactly as own.grid_incremental (its
-    plain search too, where kept candidates do not pay). Its figures use every core: compare them
-    with that in mind."""
+    plain search too, where kept candidates do not pay). On boxes that turn, own.grid's search
+    on one thread, as own.grid_incremental (see its `_reshape`). Its figures use every core:
+    compare them with that in mind."""
 
     name = "own.grid_parallel"
     defaults = {**IncrementalGrid.defaults, "parallel_from": PARALLEL_FROM_OBJECTS}
@@ -278,7 +279,7 @@ class ParallelIncrementalGrid(IncrementalGrid):
         self._m = m
 
     def _pairs(self):
-        if not self._chunked:
+        if not self._chunked or self._plain is not None:
             return super()._pairs()
         out, (tests,) = self._collect(chunked_pairs, self._state, self._radius_by_rank, self._cand, self._counts,
                                       self._hits, self._found, self._dim)
