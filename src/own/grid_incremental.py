@@ -356,6 +356,9 @@ class IncrementalGrid(StaticsApart, CellLayout):
             self._plain = UniformGrid(p=self.params["p"], cell=self.params["cell"],
                                       specialise=self.params["specialise"])
             self._plain.small_scene_n = -1  # a structure at every size, as this backend's (none: all static)
+            # This backend's buffers, already sized for a frame's pairs: a fresh collector's first
+            # buffer is too small, and the first search would run twice.
+            self._plain._collect = self._collect
         self._plain.reset(positions, **size_keyword(self.radii))
         self._quiet = 0
 
