@@ -397,8 +397,8 @@ class IncrementalGrid(StaticsApart, CellLayout):
         candidates each frame cost 1.5x an own.grid frame on the turning box families); kept
         candidates come back once shapes and cells stay put. `candidates="kept"`, or objects that
         came or went: built anew. (own.grid_parallel, which never chooses the plain search for its
-        candidates' count, takes it here too: a chunked rebuild every frame cost 2.2x the plain
-        search on one thread, 51 against 23 ms a frame on the debris at n = 65536.)"""
+        candidates' count, takes it here too: a chunked rebuild every frame cost 2x the plain search
+        on one thread, 83-108 against 40-49 ms a frame on the debris at n = 65536.)"""
         if len(self.spawned) or len(self.removed) or self.params["candidates"] != "auto":
             super()._reshape(positions)
             return
