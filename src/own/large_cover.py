@@ -16,16 +16,16 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .common import cell_of, emit, half_of
-from .static_boxes import _advance, _covered, _key, cover_build
+from .common import emit, half_of
+from .static_boxes import CELLS_PER_ENTRY, _advance, _covered, _key, cover_build, meets_here
 
 # Below this many large objects the sweep is cheap, and the cells' set-up is not.
 COVER_FROM = 64
 # Cells start at the large objects' median longest side and grow (x 1.5) until each object is
 # filed in at most ENTRIES_PER_AXIS ** d cells on average, and there are at most CELLS_PER_ENTRY
-# cells per entry (a few huge boxes among many would otherwise fill a fine grid).
+# cells per entry, as for the static boxes (a few huge boxes among many would otherwise fill a
+# fine grid).
 ENTRIES_PER_AXIS = 4
-CELLS_PER_ENTRY = 4
 
 
 @nb.njit(cache=True)
@@ -90,14 +90,8 @@ def covered_pairs(centres, sizes, ids, origin, inv, last, strides, start, entrie
             e = start[c + 1] - 1
             while e >= start[c] and entries[e] > k:  # a cell's rows ascend: the later ones last
                 j = entries[e]
-                meets = here = True
-                for a in range(d):
-                    h = half_of(sizes, j, a)
-                    jlo, jhi = centres[j, a] - h, centres[j, a] + h
-                    meets &= max(klo[a], jlo) <= min(khi[a], jhi)  # as boxes_overlap tests it
-                    here &= cell_of(max(klo[a], jlo), origin[a], inv[a], last[a]) == at[a]
                 emit(buf, count, i, ids[j])
-                count += meets & here
+                count += meets_here(klo, khi, centres, sizes, j, at, origin, inv, last, d)
                 e -= 1
             tests += start[c + 1] - 1 - e
             if not _advance(at, lo, hi, d):

@@ -58,6 +58,19 @@ def _covered(positions, sizes, k, origin, inv, last, lo, hi, at, d):
         at[a] = lo[a]
 
 
+@nb.njit(cache=True, inline="always")
+def meets_here(qlo, qhi, positions, sizes, k, at, origin, inv, last, d):
+    """Whether the box of row k meets the box qlo..qhi, and this cell `at` holds the low corner of
+    their intersection (the one cell the pair is reported from: see the module docstring)."""
+    meets = here = True
+    for a in range(d):
+        h = half_of(sizes, k, a)
+        slo, shi = positions[k, a] - h, positions[k, a] + h
+        meets &= (slo <= qhi[a]) & (qlo[a] <= shi)
+        here &= cell_of(max(slo, qlo[a]), origin[a], inv[a], last[a]) == at[a]
+    return meets & here
+
+
 @nb.njit(cache=True)
 def cover_build(positions, sizes, origin, inv, last, strides, cells, dim):
     """(start, entries): the statics (rows of positions, sizes) filed in every cell their box
@@ -114,13 +127,7 @@ def against_static_boxes(q_ids, q_centres, q_sizes, q_end, s_objects, s_position
             tests += start[c + 1] - start[c]
             for e in range(start[c], start[c + 1]):
                 k = entries[e]
-                meets = here = True
-                for a in range(d):
-                    h = s_sizes[k, a]
-                    slo, shi = s_positions[k, a] - h, s_positions[k, a] + h
-                    meets &= (slo <= qhi[a]) & (qlo[a] <= shi)
-                    here &= cell_of(max(slo, qlo[a]), origin[a], inv[a], last[a]) == at[a]
-                if meets and here:
+                if meets_here(qlo, qhi, s_positions, s_sizes, k, at, origin, inv, last, d):
                     emit(buf, count, i, s_objects[k])
                     count += 1
             if not _advance(at, lo, hi, d):
