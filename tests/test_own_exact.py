@@ -278,12 +278,12 @@ def test_sap_strips_give_up_on_a_box_that_spans_more_than_two_strips():
 
     scene = generate("uniform", 500, seed=6)
     n = scene.n
-    axis, base, inv_height, strips, s0, s1 = strip_plan(scene.positions, scene.radii, 0, True, -1)
-    assert strips > 2
-    plan = (axis, base, 2.0 * inv_height, min(2 * strips, n), s0, s1)
+    axis, base, inv_height, strips, s0, s1, large = strip_plan(scene.positions, scene.radii, 0, True, -1)
+    assert strips > 2 and large == np.inf  # equal radii: none in the large bucket
+    plan = (axis, base, 2.0 * inv_height, min(2 * strips, n), s0, s1, large)
     work = (np.empty((n, 2)), np.empty(n), np.empty(n), np.empty(n, dtype=np.int64))
     args = (np.full(n + 1, -1), False, np.empty(n + 1, dtype=np.int64), work, tuple(np.empty(n) for _ in range(4)),
-            np.zeros(plan[3] + 1, dtype=np.int64), np.empty(plan[3]), np.empty(n, dtype=np.int64))
+            np.zeros(plan[3] + 2, dtype=np.int64), np.empty(plan[3] + 1), np.empty(n, dtype=np.int64))
     assert strip_prepare(scene.positions, scene.radii, plan, *args) == -2
 
 

@@ -19,7 +19,7 @@ from .radix import radix_argsort, sortable_bits
 from .skin import SkinSchedule, filter_pairs, largest_step
 from .small import SmallScenes
 from .statics import StaticsApart
-from .strips import strip_plan, strip_prepare, strip_sweep, strip_sweep_parallel
+from .strips import strip_pairs, strip_pairs_parallel, strip_plan, strip_prepare
 
 AXES = ("x", "y", "z", "auto")  # "z": spheres only
 SWEEPS = ("auto", "plain", "sparse")
@@ -412,9 +412,10 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         self._work = (np.empty((n, d)), np.empty(self.radii.shape), np.empty(n), np.empty(n, dtype=np.int64))
         self._bounds = np.empty((2 * d, n))  # sorted: lo, hi on the sweep axis, then on each other axis
         self._rows = tuple(self._bounds)  # the strips' form of them (2D): s_lo, s_hi, o_lo, o_hi
-        # The strip sweep's first slot and widest box of each strip, and each object's strip (2D);
-        # the columns' order, bounds, starts, widest boxes and row width (3D).
-        self._strip_start, self._strip_width = np.zeros(n + 1, dtype=np.int64), np.empty(n)
+        # The strip sweep's first slot and widest box of each strip and of the large bucket after
+        # them, and each object's strip (2D); the columns' order, bounds, starts, widest boxes and
+        # row width (3D).
+        self._strip_start, self._strip_width = np.zeros(n + 2, dtype=np.int64), np.empty(n + 1)
         self._strip_of = np.empty(n, dtype=np.int64)
         self._strips = 0  # strips swept this frame; 0: a plain sweep
         self._col_order, self._col_bounds = np.empty(n, dtype=np.int64), np.empty((2 * d, n))
@@ -434,8 +435,8 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         if self._collect_chunks is not None:
             self._collect_chunks(sap_sweep_parallel, no_order, nothing, self._no_bounds32, self._ramp, self._dim)
             if self.params["strips"] != "off" and d == 2:
-                self._collect_chunks(strip_sweep_parallel, no_order, *nothing, np.zeros(1, dtype=np.int64),
-                                     np.empty(0))
+                self._collect_chunks(strip_pairs_parallel, no_order, *nothing, np.zeros(3, dtype=np.int64),
+                                     np.zeros(2), 0.0, 1.0, positions, self._sweep_radii)
         self._build(positions)
 
     def _set_sweep_radii(self):
@@ -529,23 +530,25 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
             return False
         repair = self._repair_due()
         swaps = strip_prepare(positions, self._sweep_radii, plan, self._order, repair, self._spare_order,
-                              self._work, self._rows, self._strip_start[:strips + 1], self._strip_width[:strips],
+                              self._work, self._rows, self._strip_start[:strips + 2], self._strip_width[:strips + 1],
                               self._strip_of)
         if swaps == -2:
             return False
         self._repairs.record(repair and last == axis + 2, swaps)
         self._order, self._spare_order = self._spare_order, self._order
-        self._strips, self._sparse = strips, False
-        self._stats = {"axis": axis, "swaps": swaps, "sparse_sweep": 0, "crowded_windows": 0, "strips": strips}
+        self._strips, self._sparse, self._strip_cut = strips, False, (plan[1], plan[2])
+        self._stats = {"axis": axis, "swaps": swaps, "sparse_sweep": 0, "crowded_windows": 0, "strips": strips,
+                       "large": self.n - int(self._strip_start[strips])}
         return True
 
     def _strip_pairs(self):
-        args = (self._order[:self.n], *self._rows, self._strip_start[:self._strips + 1],
-                self._strip_width[:self._strips])
+        built = self._anchor if self._anchor is not None else self._positions  # where the bounds were made
+        args = (self._order[:self.n], *self._rows, self._strip_start[:self._strips + 2],
+                self._strip_width[:self._strips + 1], *self._strip_cut, built, self._sweep_radii)
         if self._collect_chunks is not None and self._last_overlaps >= self._parallel_from:
-            out, (tested,) = self._collect_chunks(strip_sweep_parallel, *args)
+            out, (tested,) = self._collect_chunks(strip_pairs_parallel, *args)
         else:
-            out, (tested,) = self._collect(strip_sweep, *args, 0, self.n)
+            out, (tested,) = self._collect(strip_pairs, *args)
         self._stats["axis_overlaps"] = self._last_overlaps = tested
         self._last_pairs = len(out)
         return out
@@ -604,7 +607,7 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         halves = self._sweep_radii[order] if self.shape == "balls" else self._sweep_radii[order, axis]
         assert np.array_equal(s_lo, built[order, axis] - halves), \
             "sorted bounds are not their objects'"
-        starts = self._strip_start[:self._strips + 1] if self._strips else np.array([0, n])
+        starts = self._strip_start[:self._strips + 2] if self._strips else np.array([0, n])
         assert starts[0] == 0 and starts[-1] == n and (np.diff(starts) >= 0).all(), "strips do not tile the order"
         for s, e in zip(starts[:-1], starts[1:]):
             assert (np.diff(s_lo[s:e]) >= 0).all(), \
