@@ -25,6 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .checks import check_extents, check_mask, check_positions, check_radii, first_moved, shown
+from .queries import Query, check_points, check_query_boxes, check_rays, unanswered
 
 if TYPE_CHECKING:
     from .knobs import Knob
@@ -249,6 +250,8 @@ class BroadPhase(ABC):
     # Whether `_update` takes boxes' new extents (in `radii`) like a move: a structure kept over
     # frames with a skin, whose boxes grown by the skin still hold a box that grew within it.
     resizes: ClassVar[bool] = False
+    # The queries it answers besides the pairs (interface/queries.py): "rays", "boxes", "points".
+    answers: ClassVar[tuple[Query, ...]] = ()
 
     def __init__(self, **params: Any) -> None:
         unknown = sorted(set(params) - set(self.defaults))
@@ -445,6 +448,63 @@ class BroadPhase(ABC):
         if self.static is not None and not self.statics_held_apart:
             found = found[~(self.static[found[:, 0]] & self.static[found[:, 1]])]
         return found
+
+    def raycast(self, origins: npt.ArrayLike, directions: npt.ArrayLike,
+                lengths: npt.ArrayLike) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
+        """The closest hit of each ray origin + t * direction (normalised here), 0 <= t <= length,
+        on the objects alive: (ids (m,), -1 for none; t (m,), inf for none). The hit is on the
+        object's shape; of equal t, the lowest id (interface/queries.py)."""
+        o, u, length = check_rays(origins, directions, lengths, self._asked("rays"))
+        hit, t = self._closest_hits(o, u, length)
+        return self._object_ids(hit), t
+
+    def raycast_all(self, origins: npt.ArrayLike, directions: npt.ArrayLike, lengths: npt.ArrayLike) -> PairArray:
+        """Every (ray, object) whose shape the ray's segment meets, (m, 2), sorted."""
+        o, u, length = check_rays(origins, directions, lengths, self._asked("rays"))
+        return self._met(self._every_hit(o, u, length))
+
+    def query_boxes(self, lo: npt.ArrayLike, hi: npt.ArrayLike) -> PairArray:
+        """Every (query, object) whose box overlaps the query box lo..hi (closed), (m, 2), sorted."""
+        low, high = check_query_boxes(lo, hi, self._asked("boxes"))
+        return self._met(self._boxes_met(low, high))
+
+    def query_points(self, points: npt.ArrayLike) -> PairArray:
+        """Every (query, object) whose shape holds the point (its boundary too), (m, 2), sorted."""
+        return self._met(self._points_met(check_points(points, self._asked("points"))))
+
+    def _asked(self, kind: Query) -> int:
+        """The dimension a query of `kind` comes in, once this backend is built and answers it."""
+        if kind not in self.answers:
+            raise NotImplementedError(unanswered(self, kind))
+        if not self._built:
+            raise RuntimeError(f"{self.name}: call reset(positions, radii) before a query")
+        return self.dim
+
+    def _object_ids(self, held: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
+        """Rows of the objects held (-1: none) as object ids."""
+        if self._alive_ids is None:
+            return held
+        return np.where(held >= 0, self._alive_ids[np.maximum(held, 0)], -1) if len(self._alive_ids) else held
+
+    def _met(self, found: PairArray) -> PairArray:
+        """(query, held row) as (query, object id), sorted."""
+        if self._alive_ids is not None and len(found):
+            found = np.column_stack([found[:, 0], self._alive_ids[found[:, 1]]])
+        return found[np.lexsort((found[:, 1], found[:, 0]))] if len(found) else found
+
+    # A backend that answers queries implements those of its kinds, on the objects it holds (rows
+    # of what `_reset` was handed): (row, t) of each ray's closest hit, and (query, row) pairs.
+    def _closest_hits(self, origins, directions, lengths):
+        raise NotImplementedError(unanswered(self, "rays"))
+
+    def _every_hit(self, origins, directions, lengths) -> PairArray:
+        raise NotImplementedError(unanswered(self, "rays"))
+
+    def _boxes_met(self, lo, hi) -> PairArray:
+        raise NotImplementedError(unanswered(self, "boxes"))
+
+    def _points_met(self, points) -> PairArray:
+        raise NotImplementedError(unanswered(self, "points"))
 
     def stats(self) -> dict[str, float]:
         """Work counters of the last build or query (nodes visited, duplicate tests...)."""

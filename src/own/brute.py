@@ -8,6 +8,7 @@ import numpy as np
 from interface.base import BroadPhase, PairArray
 
 from .common import boxes
+from .query_reference import boxes_meeting, closest_hits, every_ray_hit, points_inside
 from .statics import StaticsApart
 
 # Rows per block so that one block's boolean matrix stays around 8 M entries.
@@ -33,12 +34,14 @@ def brute_pairs(positions: np.ndarray, radii: np.ndarray) -> PairArray:
 
 
 class Brute(StaticsApart, BroadPhase):
-    """Tests all n(n-1)/2 pairs. The reference the tests compare every other backend with."""
+    """Tests all n(n-1)/2 pairs, and every object for each query (own/query_reference.py). The
+    reference the tests compare every other backend with."""
 
     name = "own.brute"
     method = "brute"
     dims = (2, 3)
     shapes = ("balls", "boxes")
+    answers = ("rays", "boxes", "points")
 
     def _reset(self, positions, radii):
         self._pos = positions
@@ -51,3 +54,18 @@ class Brute(StaticsApart, BroadPhase):
 
     def stats(self):
         return {"tests": self.n * (self.n - 1) / 2}
+
+    def _closest_hits(self, origins, directions, lengths):
+        return closest_hits(origins, directions, lengths, self._pos, self.radii)
+
+    def _every_hit(self, origins, directions, lengths):
+        return every_ray_hit(origins, directions, lengths, self._pos, self.radii)
+
+    def _boxes_met(self, lo, hi):
+        return boxes_meeting(lo, hi, self._pos, self.radii)
+
+    def _points_met(self, points):
+        return points_inside(points, self._pos, self.radii)
+
+    def _new_statics_answerer(self):
+        return Brute()  # the reference answers on the statics too

@@ -20,6 +20,7 @@ from interface.base import size_keyword
 from interface.checks import check_positions
 
 from .common import half_of
+from .query_reference import boxes_meeting, closest_hits, every_ray_hit, points_inside
 
 # At or below this many objects, no structure. Per frame (update + pairs) against our fastest
 # structure, the incremental grid: at the essay's density 2.8 against 6.1 us at n = 64, and still
@@ -86,7 +87,7 @@ class SmallScenes:
             super().reset(pos, **size_keyword(sizes), static=static, alive=alive)
             return
         self.radii, self.n, self.objects, self._small, self._built = sizes, pos.shape[0], pos.shape[0], pos, True
-        self._all_radii, self._static_home = sizes, None
+        self._all_radii, self._static_home, self._alive_ids = sizes, None, None
         self._order, self._lo = np.arange(self.n, dtype=np.int64), np.empty(self.n)
         self._stats = {"small_scene": 1}
 
@@ -104,6 +105,23 @@ class SmallScenes:
 
     def pairs(self):
         return super().pairs() if self._small is None else small_sweep(self._small, self.radii, self._order, self._lo)
+
+    # A small scene's queries test every object, as its pairs do (own/query_reference.py).
+    def _closest_hits(self, origins, directions, lengths):
+        if self._small is None:
+            return super()._closest_hits(origins, directions, lengths)
+        return closest_hits(origins, directions, lengths, self._small, self.radii)
+
+    def _every_hit(self, origins, directions, lengths):
+        if self._small is None:
+            return super()._every_hit(origins, directions, lengths)
+        return every_ray_hit(origins, directions, lengths, self._small, self.radii)
+
+    def _boxes_met(self, lo, hi):
+        return super()._boxes_met(lo, hi) if self._small is None else boxes_meeting(lo, hi, self._small, self.radii)
+
+    def _points_met(self, points):
+        return super()._points_met(points) if self._small is None else points_inside(points, self._small, self.radii)
 
 
 def _unless_small(method: Callable, answer: Callable) -> Callable:

@@ -34,6 +34,7 @@ from .common import PairCollector, gather, half_of
 from .dimension import marker
 from .morton import bit_length
 from .skin import SkinSchedule, filter_pairs, skin_used
+from .tree_query import tree_closest_hits, tree_every_hit, tree_region_met
 from .tree_search import CHILD, END, NO_CHILD, START, tree_bounds, tree_pairs
 
 # The skin a tree starts with, and the most it grows to, in mean diameters (own/skin.py), as the
@@ -157,11 +158,13 @@ class MortonTree(BroadPhase):
 
     build = None
     resizes = True  # new extents: a box that grew is a box whose side moved (skin_used)
+    answers = ("rays", "boxes", "points")  # down the nodes (own/tree_query.py)
 
     def __init__(self, **params):
         super().__init__(**params)
         self._collect = PairCollector()
         self._keep = PairCollector()  # the kept pairs, apart from the buffers a frame's pairs are handed back in
+        self._query_collect = PairCollector()
 
     def _reset(self, positions, radii):
         n, dim = self.n, self.dim
@@ -253,6 +256,24 @@ class MortonTree(BroadPhase):
         self._overlapping = len(out)
         self._stats["kept"] = len(self._kept)
         return out
+
+    # Queries on this frame's shapes, down the tree as it stands: its bounds hold them (grown by
+    # the skin since the build, or refitted to them), so no query rebuilds it.
+    def _closest_hits(self, origins, directions, lengths):
+        return tree_closest_hits(origins, directions, lengths, self._positions, self.radii, self._order, self._nodes,
+                                 self._bounds)
+
+    def _every_hit(self, origins, directions, lengths):
+        return self._query_collect(tree_every_hit, origins, directions, lengths, self._positions, self.radii,
+                                   self._order, self._nodes, self._bounds)[0]
+
+    def _boxes_met(self, lo, hi):
+        return self._query_collect(tree_region_met, lo, hi, lo[:0], self._positions, self.radii, self._order,
+                                   self._nodes, self._bounds)[0]
+
+    def _points_met(self, points):
+        return self._query_collect(tree_region_met, points, points, points, self._positions, self.radii, self._order,
+                                   self._nodes, self._bounds)[0]
 
     def _validate_tree(self, capacity_ok):
         """The checks every such tree passes; `capacity_ok(s, e)`: whether a leaf of that slice

@@ -1,0 +1,168 @@
+"""The exact answer to the queries a project puts to its structure every frame, by brute force over
+every object, in 2D and 3D: rays (the closest hit, or every hit), box overlaps and points.
+
+The tests of one query against one object (`ray_hit`, `box_meets`, `point_inside`) are the ones
+every structure of ours applies to the objects it does not prune, so that a structure agrees with
+this reference bit for bit wherever it visits the object at all.
+
+The rules, as the interface states them:
+- a ray is the segment origin + t * direction, 0 <= t <= length, direction of unit length; it hits
+  an object whose shape it meets (a ball's circle or sphere, a box's box, closed), at the least
+  such t: 0 where the origin is inside. A ray of length 0 hits what holds its origin.
+- the closest hit of a ray is the object of least t; of equal t, the lowest object id.
+- a box query meets each object whose box (a ball's: centre -+ radius) overlaps it, closed
+  intervals, the rule of the pairs.
+- a point query meets each object whose shape holds the point (the boundary counts).
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+from numba.extending import overload
+
+from .common import half_of
+
+NO_HIT = -1
+
+
+def ray_hit(origins, directions, lengths, q, positions, sizes, k):
+    """The t at which ray q first meets object k's shape, or inf where it misses: compiled apart
+    for balls (a vector of radii) and boxes (a matrix of half-extents), as common.half_of is."""
+
+
+@overload(ray_hit, inline="always")
+def _ray_hit(origins, directions, lengths, q, positions, sizes, k):
+    if sizes.ndim == 1:
+        return lambda origins, directions, lengths, q, positions, sizes, k: _ray_ball(
+            origins, directions, lengths, q, positions, sizes, k)
+    return lambda origins, directions, lengths, q, positions, sizes, k: _ray_box(
+        origins, directions, lengths, q, positions, sizes, k)
+
+
+@nb.njit(cache=True, inline="always")
+def _ray_ball(origins, directions, lengths, q, positions, radii, k):
+    """|o + t u - c| = r, u of unit length: the lesser root, 0 where the origin is inside."""
+    b = cc = 0.0
+    for a in range(positions.shape[1]):
+        oc = origins[q, a] - positions[k, a]
+        b += oc * directions[q, a]
+        cc += oc * oc
+    cc -= radii[k] * radii[k]
+    if cc <= 0.0:  # the origin inside (or on) the ball
+        return 0.0
+    disc = b * b - cc
+    if b > 0.0 or disc < 0.0:  # heading away, or passing by
+        return np.inf
+    t = max(-b - np.sqrt(disc), 0.0)
+    return t if t <= lengths[q] else np.inf
+
+
+@nb.njit(cache=True, inline="always")
+def _ray_box(origins, directions, lengths, q, positions, extents, k):
+    """The slabs, closed: the largest entering t over the axes, if no exit comes before it."""
+    t0, t1 = 0.0, lengths[q]
+    for a in range(positions.shape[1]):
+        lo, hi = positions[k, a] - extents[k, a], positions[k, a] + extents[k, a]
+        o, u = origins[q, a], directions[q, a]
+        if u == 0.0:
+            if o < lo or o > hi:
+                return np.inf
+            continue
+        s0, s1 = (lo - o) / u, (hi - o) / u
+        if s0 > s1:
+            s0, s1 = s1, s0
+        t0, t1 = max(t0, s0), min(t1, s1)
+        if t0 > t1:
+            return np.inf
+    return t0
+
+
+@nb.njit(cache=True, inline="always")
+def box_meets(lo, hi, q, positions, sizes, k):
+    """Whether object k's box overlaps query box q (closed intervals)."""
+    hit = True
+    for a in range(positions.shape[1]):
+        h = half_of(sizes, k, a)
+        hit &= (positions[k, a] - h <= hi[q, a]) & (lo[q, a] <= positions[k, a] + h)
+    return hit
+
+
+def point_inside(points, q, positions, sizes, k):
+    """Whether object k's shape holds point q (its boundary too)."""
+
+
+@overload(point_inside, inline="always")
+def _point_inside(points, q, positions, sizes, k):
+    if sizes.ndim == 1:
+        return lambda points, q, positions, sizes, k: _point_in_ball(points, q, positions, sizes, k)
+    return lambda points, q, positions, sizes, k: _point_in_box(points, q, positions, sizes, k)
+
+
+@nb.njit(cache=True, inline="always")
+def _point_in_ball(points, q, positions, radii, k):
+    s = 0.0
+    for a in range(positions.shape[1]):
+        s += (points[q, a] - positions[k, a]) ** 2
+    return s <= radii[k] * radii[k]
+
+
+@nb.njit(cache=True, inline="always")
+def _point_in_box(points, q, positions, extents, k):
+    inside = True
+    for a in range(positions.shape[1]):
+        inside &= (positions[k, a] - extents[k, a] <= points[q, a]) & (points[q, a] <= positions[k, a] + extents[k, a])
+    return inside
+
+
+@nb.njit(cache=True)
+def closest_hits(origins, directions, lengths, positions, sizes):
+    """(object, t) of each ray's closest hit over every object: NO_HIT and inf where it hits none."""
+    m = origins.shape[0]
+    hit, at = np.full(m, NO_HIT, dtype=np.int64), np.full(m, np.inf)
+    for q in range(m):
+        for k in range(positions.shape[0]):
+            t = ray_hit(origins, directions, lengths, q, positions, sizes, k)
+            if t < at[q]:  # ascending k: of equal t, the lowest id stays
+                hit[q], at[q] = k, t
+    return hit, at
+
+
+@nb.njit(cache=True)
+def _all_meeting(kind, a0, a1, a2, positions, sizes):
+    """Every (query, object) the queries meet, by query then object: kind 0 rays (a0..a2: origins,
+    directions, lengths), 1 boxes (lo, hi), 2 points."""
+    m, n = a0.shape[0], positions.shape[0]
+    out = np.empty((16, 2), dtype=np.int64)
+    count = 0
+    for q in range(m):
+        for k in range(n):
+            if kind == 0:
+                met = ray_hit(a0, a1, a2, q, positions, sizes, k) < np.inf
+            elif kind == 1:
+                met = box_meets(a0, a1, q, positions, sizes, k)
+            else:
+                met = point_inside(a0, q, positions, sizes, k)
+            if met:
+                if count == out.shape[0]:
+                    grown = np.empty((2 * count, 2), dtype=np.int64)
+                    grown[:count] = out
+                    out = grown
+                out[count, 0], out[count, 1] = q, k
+                count += 1
+    return out[:count].copy()
+
+
+def every_ray_hit(origins, directions, lengths, positions, sizes) -> np.ndarray:
+    """Every (ray, object) whose segment meets the object's shape, (m, 2), sorted."""
+    return _all_meeting(0, origins, directions, lengths, positions, sizes)
+
+
+def boxes_meeting(lo, hi, positions, sizes) -> np.ndarray:
+    """Every (query, object) whose boxes overlap, (m, 2), sorted."""
+    return _all_meeting(1, lo, hi, np.empty(0), positions, sizes)
+
+
+def points_inside(points, positions, sizes) -> np.ndarray:
+    """Every (query, object) whose shape holds the point, (m, 2), sorted."""
+    return _all_meeting(2, points, points, np.empty(0), positions, sizes)

@@ -1,0 +1,270 @@
+"""The queries besides the pairs (interface/queries.py): the exact reference on hand-made cases
+and against independent geometry, the checks at the interface, and the backends that answer."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import engines
+from interface.queries import check_rays
+from own.query_reference import boxes_meeting, closest_hits, every_ray_hit, points_inside
+
+ANSWERING = [n for n in engines.available() if engines.backend_class(n).answers]
+
+
+def ray(origin, direction, length):
+    """One ray as the reference takes it (direction normalised, as the interface does)."""
+    u = np.asarray(direction, dtype=float)
+    return (np.array([origin], dtype=float), np.array([u / np.linalg.norm(u)]), np.array([float(length)]))
+
+
+BALL = (np.array([[0.0, 0.0]]), np.array([1.0]))
+BOX = (np.array([[0.0, 0.0]]), np.array([[2.0, 1.0]]))  # x in [-2, 2], y in [-1, 1]
+# (name, ray, shape, expected t or None for a miss)
+CASES = [
+    ("straight at a circle", ray([-5, 0], [1, 0], 10), BALL, 4.0),
+    ("grazing a circle", ray([-5, 1], [1, 0], 10), BALL, 5.0),
+    ("passing a circle by", ray([-5, 1.0000001], [1, 0], 10), BALL, None),
+    ("starting inside a circle", ray([0.5, 0], [1, 0], 10), BALL, 0.0),
+    ("starting on a circle, heading out", ray([1, 0], [1, 0], 10), BALL, 0.0),
+    ("ending on a circle", ray([-5, 0], [1, 0], 4), BALL, 4.0),
+    ("ending short of a circle", ray([-5, 0], [1, 0], 3.999), BALL, None),
+    ("heading away from a circle", ray([-5, 0], [-1, 0], 10), BALL, None),
+    ("zero length inside a circle", ray([0.2, 0.2], [0, 1], 0), BALL, 0.0),
+    ("zero length outside a circle", ray([3, 0], [0, 1], 0), BALL, None),
+    ("straight at a box", ray([-5, 0], [1, 0], 10), BOX, 3.0),
+    ("along a box's top edge", ray([-5, 1], [1, 0], 10), BOX, 3.0),
+    ("along a box's top edge, just above", ray([-5, 1.0000001], [1, 0], 10), BOX, None),
+    ("through a box's corner", ray([-3, 2], [1, -1], 10), BOX, np.sqrt(2.0)),
+    ("starting inside a box", ray([1, 0.5], [0, 1], 10), BOX, 0.0),
+    ("ending on a box's face", ray([0, -4], [0, 1], 3), BOX, 3.0),
+    ("zero length on a box's corner", ray([2, 1], [1, 0], 0), BOX, 0.0),
+    ("parallel to a box, beside it", ray([3, -5], [0, 1], 10), BOX, None),
+]
+
+
+@pytest.mark.parametrize("name, query, shape, expected", CASES, ids=[c[0] for c in CASES])
+def test_the_reference_ray_on_hand_made_cases(name, query, shape, expected):
+    hit, t = closest_hits(*query, *shape)
+    if expected is None:
+        assert hit[0] == -1 and t[0] == np.inf
+    else:
+        assert hit[0] == 0 and t[0] == pytest.approx(expected, abs=1e-12)
+    assert len(every_ray_hit(*query, *shape)) == (expected is not None)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_the_closest_hit_of_equal_distance_is_the_lowest_id(dim):
+    positions = np.zeros((3, dim))
+    positions[:, 1] = [2.0, -2.0, 0.0]  # two balls the ray grazes at the same t, and one beyond
+    positions[2, 0] = 10.0
+    o, u, length = ray([-5] + [0] * (dim - 1), [1] + [0] * (dim - 1), 100)
+    hit, t = closest_hits(o, u, length, positions, np.array([2.0, 2.0, 1.0]))
+    assert (hit[0], t[0]) == (0, 5.0)
+    hit, _ = closest_hits(o, u, length, positions[::-1].copy(), np.array([1.0, 2.0, 2.0]))
+    assert hit[0] == 1
+
+
+def test_box_and_point_queries_count_their_boundaries():
+    positions, extents = np.array([[0.0, 0.0], [10.0, 0.0]]), np.array([[1.0, 1.0], [1.0, 1.0]])
+    lo, hi = np.array([[1.0, 1.0], [-5.0, -5.0], [1.0000001, 0.0]]), np.array([[3.0, 3.0], [-4.0, -4.0], [2.0, 0.0]])
+    assert boxes_meeting(lo, hi, positions, extents).tolist() == [[0, 0]]  # touching at a corner meets
+    radii = np.array([1.0, 1.0])
+    points = np.array([[1.0, 0.0], [0.8, 0.8], [11.0, 1.0]])
+    assert points_inside(points, positions, radii).tolist() == [[0, 0]]  # on the circle: inside
+    assert points_inside(points, positions, extents).tolist() == [[0, 0], [1, 0], [2, 1]]  # box corners count
+
+
+@st.composite
+def scenes_and_rays(draw, dim: int):
+    n = draw(st.integers(0, 40))
+    rng = np.random.default_rng(draw(st.integers(0, 2**31 - 1)))
+    positions = rng.uniform(-50, 50, (n, dim))
+    if draw(st.booleans()):
+        positions = np.round(positions / 5.0) * 5.0  # on a lattice: rays along rows of centres and edges
+    sizes = rng.uniform(0.5, 8, (n, dim)) if draw(st.booleans()) else rng.uniform(0.5, 8, n)
+    m = draw(st.integers(1, 20))
+    origins = rng.uniform(-60, 60, (m, dim))
+    directions = rng.normal(size=(m, dim))
+    if draw(st.booleans()):
+        origins, directions = np.round(origins / 5.0) * 5.0, np.eye(dim)[rng.integers(0, dim, m)]  # along axes
+    lengths = rng.choice([0.0, 3.0, 30.0, 200.0], m)
+    return positions, sizes, origins, directions / np.linalg.norm(directions, axis=1)[:, None], lengths
+
+
+def segment_meets(o, u, length, centre, size) -> tuple[bool, bool]:
+    """(meets, clear): whether the segment meets the shape, by independent geometry (a ball: the
+    nearest point of the segment to the centre; a 2D box: shapely), and whether that answer is
+    clear of rounding (the gap to the boundary above 1e-9)."""
+    if np.ndim(size) == 0:
+        s = np.clip(np.dot(centre - o, u), 0.0, length)
+        gap = np.linalg.norm(o + s * u - centre) - size
+        return gap <= 0.0, abs(gap) > 1e-9
+    box = shapely.box(*(centre - size), *(centre + size))
+    segment = shapely.LineString([o, o + length * u]) if length > 0 else shapely.Point(o)
+    gap = box.distance(segment)
+    return gap == 0.0, gap > 1e-9 or box.buffer(-1e-9).intersects(segment)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@settings(max_examples=60, deadline=None)
+@given(data=st.data())
+def test_the_reference_rays_agree_with_independent_geometry(dim, data):
+    positions, sizes, origins, directions, lengths = data.draw(scenes_and_rays(dim))
+    hit, t = closest_hits(origins, directions, lengths, positions, sizes)
+    every = {tuple(p) for p in every_ray_hit(origins, directions, lengths, positions, sizes).tolist()}
+    for q in range(len(origins)):
+        for k in range(len(positions)):
+            if sizes.ndim == 2 and dim == 3:
+                continue  # shapely is planar: 3D boxes are held to the closest hit's point below
+            meets, clear = segment_meets(origins[q], directions[q], lengths[q], positions[k], sizes[k])
+            if clear:
+                assert ((q, k) in every) == meets, (q, k)
+        hits_q = [k for (r, k) in every if r == q]
+        assert (hit[q] >= 0) == bool(hits_q)
+        if hit[q] >= 0:  # the closest: its point lies on the shape, and no hit is nearer
+            k = hit[q]
+            point = origins[q] + t[q] * directions[q]
+            if sizes.ndim == 1:
+                assert np.linalg.norm(point - positions[k]) <= sizes[k] * (1 + 1e-9) + 1e-9
+            else:
+                assert (np.abs(point - positions[k]) <= sizes[k] * (1 + 1e-9) + 1e-9).all()
+            nearer = closest_hits(origins[q:q + 1], directions[q:q + 1], np.array([t[q]]), positions, sizes)
+            assert nearer[0][0] == k  # cut at t, the ray still hits k first
+
+
+def random_scene(rng, n, dim, boxes):
+    positions = rng.uniform(0, 100, (n, dim))
+    sizes = rng.uniform(0.5, 6, (n, dim)) if boxes else rng.uniform(0.5, 6, n)
+    return positions, sizes
+
+
+@pytest.mark.parametrize("name", ANSWERING)
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("boxes", [False, True])
+def test_a_backend_answers_every_query_as_the_reference_with_statics_and_spawning(name, dim, boxes):
+    cls = engines.backend_class(name)
+    if dim not in cls.dims or (boxes and "boxes" not in cls.shapes):
+        pytest.skip(f"{name} takes no {'boxes' if boxes else 'balls'} in {dim}D")
+    rng = np.random.default_rng(dim + 2 * boxes)
+    n = 300
+    positions, sizes = random_scene(rng, n, dim, boxes)
+    static, alive = rng.random(n) < 0.2, rng.random(n) < 0.9
+    backend = engines.create(name)
+    backend.reset(positions, static=static, alive=alive, **({"extents": sizes} if boxes else {"radii": sizes}))
+    m = 50
+    origins, directions = rng.uniform(-10, 110, (m, dim)), rng.normal(size=(m, dim))
+    lengths = rng.choice([0.0, 5.0, 40.0, 300.0], m)
+    lo = rng.uniform(0, 100, (m, dim))
+    hi = lo + rng.uniform(0, 20, (m, dim))
+    points = rng.uniform(0, 100, (m, dim))
+    for _ in range(2):
+        ids = np.flatnonzero(alive)
+        o, u, _ = check_rays(origins, directions, lengths, dim)
+        hit, t = closest_hits(o, u, lengths, positions[ids], sizes[ids])
+        got_hit, got_t = backend.raycast(origins, directions, lengths)
+        assert np.array_equal(got_hit, np.where(hit >= 0, ids[np.maximum(hit, 0)], -1))
+        assert np.array_equal(got_t, t)
+        for got, want in ((backend.raycast_all(origins, directions, lengths),
+                           every_ray_hit(o, u, lengths, positions[ids], sizes[ids])),
+                          (backend.query_boxes(lo, hi), boxes_meeting(lo, hi, positions[ids], sizes[ids])),
+                          (backend.query_points(points), points_inside(points, positions[ids], sizes[ids]))):
+            assert got.tolist() == np.column_stack([want[:, 0], ids[want[:, 1]]]).tolist()
+        moved = positions + np.where(static[:, None], 0.0, rng.normal(0, 2, (n, dim)))
+        positions, alive = moved, alive ^ (rng.random(n) < 0.05)
+        backend.update(positions, alive)
+
+
+STRUCTURES = [n for n in ANSWERING if n != "own.brute"]
+
+
+def assert_answers_as_the_reference(backend, positions, sizes, origins, directions, lengths, lo, hi, points):
+    rays = check_rays(origins, directions, lengths, positions.shape[1])  # the directions as the call normalises them
+    hit, t = closest_hits(*rays, positions, sizes)
+    got_hit, got_t = backend.raycast(origins, directions, lengths)
+    assert np.array_equal(got_hit, hit) and np.array_equal(got_t, t)
+    assert backend.raycast_all(origins, directions, lengths).tolist() == every_ray_hit(*rays, positions, sizes).tolist()
+    assert backend.query_boxes(lo, hi).tolist() == boxes_meeting(lo, hi, positions, sizes).tolist()
+    assert backend.query_points(points).tolist() == points_inside(points, positions, sizes).tolist()
+
+
+@pytest.mark.parametrize("name", STRUCTURES)
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("small_scene_n", [0, None])  # 0: the structure at every n; None: the backend's own
+@settings(max_examples=40, deadline=None)
+@given(data=st.data())
+def test_a_structure_answers_as_the_reference_on_random_and_adversarial_scenes(name, dim, small_scene_n, data):
+    """Rays, box and point queries on random scenes, on a lattice (rays along rows of centres and
+    box edges), with zero-length rays, before and after a move that the structure takes under its
+    skin (no rebuild: the queries descend boxes grown around where the objects were)."""
+    if dim not in engines.backend_class(name).dims:
+        pytest.skip(f"{name} works in 2D only")
+    positions, sizes, origins, directions, lengths = data.draw(scenes_and_rays(dim))
+    rng = np.random.default_rng(len(positions) + len(origins))
+    lo = np.round(rng.uniform(-60, 60, (len(origins), dim)))
+    hi = lo + rng.choice([0.0, 2.0, 30.0], (len(origins), 1))
+    points = np.round(rng.uniform(-60, 60, (len(origins), dim)))
+    backend = engines.create(name)
+    if small_scene_n is not None:
+        backend.small_scene_n = small_scene_n
+    backend.reset(positions, **({"extents": sizes} if sizes.ndim == 2 else {"radii": sizes}))
+    for step in (0.0, 0.02, 3.0):  # built; moved a little (under the skin); moved far (built again)
+        positions = positions + rng.normal(0, step, positions.shape)
+        backend.update(positions)
+        assert_answers_as_the_reference(backend, positions, sizes, origins, directions, lengths, lo, hi, points)
+
+
+@pytest.mark.parametrize("name", STRUCTURES)
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("boxes", [False, True])
+def test_a_structure_finds_the_closest_hit_among_many_overlapping_shapes(name, dim, boxes):
+    """Thousands of overlapping shapes of spread sizes, rays of every length from inside and
+    outside: the nearer node is often entered first yet holds only a farther hit, which is where
+    a search that drops nodes too eagerly returns a wrong closest hit."""
+    if dim not in engines.backend_class(name).dims:
+        pytest.skip(f"{name} works in 2D only")
+    rng = np.random.default_rng(dim + 2 * boxes)
+    n, m = 3000, 2000
+    positions = rng.uniform(0, 100 if dim == 2 else 30, (n, dim))
+    sizes = rng.uniform(0.1, 1, (n, dim) if boxes else n) * np.exp(rng.uniform(0, 2.5, (n, 1) if boxes else n))
+    origins = rng.uniform(-10, 110 if dim == 2 else 40, (m, dim))
+    directions, lengths = rng.normal(size=(m, dim)), rng.choice([1.0, 10.0, 200.0], m)
+    backend = engines.create(name)
+    backend.reset(positions, **({"extents": sizes} if boxes else {"radii": sizes}))
+    backend.update(positions)
+    lo = rng.uniform(0, 100, (m, dim))
+    assert_answers_as_the_reference(backend, positions, sizes, origins, directions, lengths, lo, lo + 1.0, lo)
+
+
+def test_a_backend_that_answers_no_queries_says_so_in_one_line():
+    backend = engines.create("own.grid")
+    backend.reset(np.zeros((3, 2)), np.ones(3))
+    one_line = r"^own\.grid answers no (ray|box|point) queries \(nor any other\)$"
+    for call, args in ((backend.raycast, ([[0, 0]], [[1, 0]], 1.0)), (backend.query_boxes, ([[0, 0]], [[1, 1]])),
+                       (backend.query_points, ([[0, 0]],))):
+        with pytest.raises(NotImplementedError, match=one_line):
+            call(*args)
+
+
+@pytest.mark.parametrize("call, args, words", [
+    ("raycast", ([[0, 0]], [[0, 0]], 1.0), "directions row 0 has no length to normalise"),
+    ("raycast", ([[0, 0]], [[1, 0]], -1.0), "lengths row 0 must be a finite distance >= 0"),
+    ("raycast", ([[0, 0]], [[1, 0]], [1.0, 2.0]), r"lengths must be one number or one per ray \(1,\)"),
+    ("raycast_all", ([[0, 0, 0]], [[1, 0, 0]], 1.0), r"origins must have shape \(m, 2\) for a scene in 2D"),
+    ("raycast", ([[np.nan, 0]], [[1, 0]], 1.0), "origins row 0 is not finite"),
+    ("raycast", ([[0, 0], [1, 1]], [[1, 0]], 1.0), "directions has 1 rows but there are 2 queries"),
+    ("query_boxes", ([[0, 0]], [[1, -1]]), "query box 0 has lo above hi"),
+    ("query_points", ([[0, "a"]],), "points must be real numbers"),
+])
+def test_bad_queries_are_one_line_naming_the_problem(call, args, words):
+    backend = engines.create("own.brute")
+    with pytest.raises(RuntimeError, match="call reset"):
+        getattr(backend, call)(*args)
+    backend.reset(np.zeros((3, 2)), np.ones(3))
+    with pytest.raises(ValueError, match=words) as raised:
+        getattr(backend, call)(*args)
+    assert "\n" not in str(raised.value)
