@@ -59,20 +59,22 @@ def _ray_ball(origins, directions, lengths, q, positions, radii, k):
 
 
 @nb.njit(cache=True, inline="always")
+def clip_to_slab(lo, hi, o, u, t0, t1):
+    """The part t0..t1 of a ray (origin o, direction u along this axis) inside the slab lo..hi
+    (closed); t0 > t1 where none is."""
+    if u == 0.0:
+        return (t0, t1) if lo <= o <= hi else (np.inf, -np.inf)
+    s0, s1 = (lo - o) / u, (hi - o) / u
+    return max(t0, min(s0, s1)), min(t1, max(s0, s1))
+
+
+@nb.njit(cache=True, inline="always")
 def _ray_box(origins, directions, lengths, q, positions, extents, k):
     """The slabs, closed: the largest entering t over the axes, if no exit comes before it."""
     t0, t1 = 0.0, lengths[q]
     for a in range(positions.shape[1]):
-        lo, hi = positions[k, a] - extents[k, a], positions[k, a] + extents[k, a]
-        o, u = origins[q, a], directions[q, a]
-        if u == 0.0:
-            if o < lo or o > hi:
-                return np.inf
-            continue
-        s0, s1 = (lo - o) / u, (hi - o) / u
-        if s0 > s1:
-            s0, s1 = s1, s0
-        t0, t1 = max(t0, s0), min(t1, s1)
+        t0, t1 = clip_to_slab(positions[k, a] - extents[k, a], positions[k, a] + extents[k, a], origins[q, a],
+                              directions[q, a], t0, t1)
         if t0 > t1:
             return np.inf
     return t0
@@ -128,22 +130,26 @@ def closest_hits(origins, directions, lengths, positions, sizes):
     return hit, at
 
 
+@nb.njit(cache=True, inline="always")
+def query_meets(kind, a0, a1, a2, q, positions, sizes, k):
+    """Whether query q meets object k: kind 0 rays (a0..a2: origins, directions, lengths), 1 boxes
+    (a0, a1: lo, hi), 2 points (a0)."""
+    if kind == 0:
+        return ray_hit(a0, a1, a2, q, positions, sizes, k) < np.inf
+    if kind == 1:
+        return box_meets(a0, a1, q, positions, sizes, k)
+    return point_inside(a0, q, positions, sizes, k)
+
+
 @nb.njit(cache=True)
 def _all_meeting(kind, a0, a1, a2, positions, sizes):
-    """Every (query, object) the queries meet, by query then object: kind 0 rays (a0..a2: origins,
-    directions, lengths), 1 boxes (lo, hi), 2 points."""
+    """Every (query, object) the queries meet (query_meets), by query then object."""
     m, n = a0.shape[0], positions.shape[0]
     out = np.empty((16, 2), dtype=np.int64)
     count = 0
     for q in range(m):
         for k in range(n):
-            if kind == 0:
-                met = ray_hit(a0, a1, a2, q, positions, sizes, k) < np.inf
-            elif kind == 1:
-                met = box_meets(a0, a1, q, positions, sizes, k)
-            else:
-                met = point_inside(a0, q, positions, sizes, k)
-            if met:
+            if query_meets(kind, a0, a1, a2, q, positions, sizes, k):
                 if count == out.shape[0]:
                     grown = np.empty((2 * count, 2), dtype=np.int64)
                     grown[:count] = out

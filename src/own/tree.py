@@ -34,8 +34,10 @@ from .common import PairCollector, gather, half_of
 from .dimension import marker
 from .morton import bit_length
 from .skin import SkinSchedule, filter_pairs, skin_used
-from .tree_query import tree_closest_hits, tree_every_hit, tree_region_met
+from .tree_query import tree_closest_hits, tree_met
 from .tree_search import CHILD, END, NO_CHILD, START, tree_bounds, tree_pairs
+
+NO_LENGTHS = np.empty(0)  # tree_met's third array where the queries are boxes or points
 
 # The skin a tree starts with, and the most it grows to, in mean diameters (own/skin.py), as the
 # Verlet list's.
@@ -264,16 +266,17 @@ class MortonTree(BroadPhase):
                                  self._bounds)
 
     def _every_hit(self, origins, directions, lengths):
-        return self._query_collect(tree_every_hit, origins, directions, lengths, self._positions, self.radii,
-                                   self._order, self._nodes, self._bounds)[0]
+        return self._met_in_tree(0, origins, directions, lengths)
 
     def _boxes_met(self, lo, hi):
-        return self._query_collect(tree_region_met, lo, hi, lo[:0], self._positions, self.radii, self._order,
-                                   self._nodes, self._bounds)[0]
+        return self._met_in_tree(1, lo, hi, NO_LENGTHS)
 
     def _points_met(self, points):
-        return self._query_collect(tree_region_met, points, points, points, self._positions, self.radii, self._order,
-                                   self._nodes, self._bounds)[0]
+        return self._met_in_tree(2, points, points, NO_LENGTHS)
+
+    def _met_in_tree(self, kind, *queries):
+        return self._query_collect(tree_met, kind, *queries, self._positions, self.radii, self._order, self._nodes,
+                                   self._bounds)[0]
 
     def _validate_tree(self, capacity_ok):
         """The checks every such tree passes; `capacity_ok(s, e)`: whether a leaf of that slice

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .query_reference import box_meets, point_inside, ray_hit
+from .query_reference import clip_to_slab, query_meets, ray_hit
 from .tree_search import CHILD, END, NO_CHILD, START
 
 NODE_MARGIN = 1e-9
@@ -28,16 +28,7 @@ def _enters(origins, directions, lengths, q, bounds, k, far):
     for a in range(origins.shape[1]):
         lo, hi = bounds[k, 2 * a], bounds[k, 2 * a + 1]
         pad = NODE_MARGIN * (abs(lo) + abs(hi) + (hi - lo)) + 1e-300
-        lo, hi = lo - pad, hi + pad
-        o, u = origins[q, a], directions[q, a]
-        if u == 0.0:
-            if o < lo or o > hi:
-                return np.inf
-            continue
-        s0, s1 = (lo - o) / u, (hi - o) / u
-        if s0 > s1:
-            s0, s1 = s1, s0
-        t0, t1 = max(t0, s0), min(t1, s1)
+        t0, t1 = clip_to_slab(lo - pad, hi + pad, origins[q, a], directions[q, a], t0, t1)
         if t0 > t1:
             return np.inf
     return t0
@@ -88,34 +79,6 @@ def tree_closest_hits(origins, directions, lengths, positions, sizes, order, nod
     return hit, at
 
 
-@nb.njit(cache=True)
-def tree_every_hit(origins, directions, lengths, positions, sizes, order, nodes, bounds, buf):
-    """Every (ray, row) whose shape the ray meets, into buf; returns (count,)."""
-    count = 0
-    stack = np.empty(128, dtype=np.int64)
-    for q in range(origins.shape[0] if nodes.shape[0] else 0):
-        stack[0], top = 0, 1
-        while top > 0:
-            top -= 1
-            k = stack[top]
-            if _enters(origins, directions, lengths, q, bounds, k, np.inf) == np.inf:
-                continue
-            left = nodes[k, CHILD]
-            if left == NO_CHILD:
-                for a in range(nodes[k, START], nodes[k, END]):
-                    j = order[a]
-                    if ray_hit(origins, directions, lengths, q, positions, sizes, j) < np.inf:
-                        if count < buf.shape[0]:
-                            buf[count, 0], buf[count, 1] = q, j
-                        count += 1
-                continue
-            if top + 2 > stack.shape[0]:
-                stack = np.concatenate((stack, np.empty_like(stack)))
-            stack[top], stack[top + 1] = left, left + 1
-            top += 2
-    return (count,)
-
-
 @nb.njit(cache=True, inline="always")
 def _node_meets_box(lo, hi, q, bounds, k):
     hit = True
@@ -125,33 +88,31 @@ def _node_meets_box(lo, hi, q, bounds, k):
 
 
 @nb.njit(cache=True)
-def tree_region_met(lo, hi, points, positions, sizes, order, nodes, bounds, buf):
-    """Every (query, row) met, into buf: with `points` empty, the query boxes lo..hi against the
-    objects' boxes; else the points (lo = hi = points) inside the objects' shapes. Nodes are
-    tested as boxes, exactly (comparisons only: no rounding). Returns (count,)."""
+def tree_met(kind, a0, a1, a2, positions, sizes, order, nodes, bounds, buf):
+    """Every (query, row) met (query_reference.query_meets: kind 0 rays, 1 boxes, 2 points, whose
+    a0, a1 are their lo, hi), into buf, by query. A query descends the nodes it meets (boxes and
+    points by comparisons only: exact). Returns (count,)."""
     count = 0
     stack = np.empty(128, dtype=np.int64)
-    by_point = points.shape[0] > 0
-    for q in range(lo.shape[0] if nodes.shape[0] else 0):
+    for q in range(a0.shape[0] if nodes.shape[0] else 0):
         stack[0], top = 0, 1
         while top > 0:
             top -= 1
             k = stack[top]
-            if not _node_meets_box(lo, hi, q, bounds, k):
+            if not (_enters(a0, a1, a2, q, bounds, k, np.inf) < np.inf if kind == 0 else
+                    _node_meets_box(a0, a1, q, bounds, k)):
                 continue
             left = nodes[k, CHILD]
-            if left == NO_CHILD:
-                for a in range(nodes[k, START], nodes[k, END]):
-                    j = order[a]
-                    met = point_inside(points, q, positions, sizes, j) if by_point else \
-                        box_meets(lo, hi, q, positions, sizes, j)
-                    if met:
-                        if count < buf.shape[0]:
-                            buf[count, 0], buf[count, 1] = q, j
-                        count += 1
+            if left != NO_CHILD:
+                if top + 2 > stack.shape[0]:
+                    stack = np.concatenate((stack, np.empty_like(stack)))
+                stack[top], stack[top + 1] = left, left + 1
+                top += 2
                 continue
-            if top + 2 > stack.shape[0]:
-                stack = np.concatenate((stack, np.empty_like(stack)))
-            stack[top], stack[top + 1] = left, left + 1
-            top += 2
+            for a in range(nodes[k, START], nodes[k, END]):
+                j = order[a]
+                if query_meets(kind, a0, a1, a2, q, positions, sizes, j):
+                    if count < buf.shape[0]:
+                        buf[count, 0], buf[count, 1] = q, j
+                    count += 1
     return (count,)
