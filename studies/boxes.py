@@ -32,6 +32,7 @@ from .lib.runner import Runner
 from .scenes import WITHIN, _f, size_list, verdict
 
 BOX_FAMILIES = {family: dim for dim in (2, 3) for family in families_in(dim, "boxes")}
+DEFAULT_N = 4096
 MODELS = ("boxes", "circles")  # the experiment column: the boxes themselves, or their bounding circles
 
 
@@ -39,7 +40,8 @@ def parser() -> Parser:
     p = Parser(prog="python -m studies.boxes", description=__doc__.split("\n\n")[0])
     p.add_argument("--families", metavar="NAME[,NAME]",
                    help=f"box families (default all: {', '.join(f'{f} ({d}D)' for f, d in BOX_FAMILIES.items())})")
-    p.add_argument("--sizes", default="4096", metavar="N[,N]", help="object counts (default 4096)")
+    p.add_argument("--sizes", default=str(DEFAULT_N), metavar="N[,N]",
+                   help=f"object counts (default {DEFAULT_N}; other sizes report to BOXES-<sizes>.md)")
     add_backends_option(p)
     add_trial_options(p, frames=20, repeat=2, budget=0.25, timeout=300.0)
     add_output_options(p, "boxes", report_dir="docs/ for a full run, --out for --quick")
@@ -186,11 +188,17 @@ def report(folder: Path, report_to: Path) -> int:
         lines += ["", f"Not run (unavailable on the measuring machine): {', '.join(unavailable)}."]
     report_to.mkdir(parents=True, exist_ok=True)
     pd.DataFrame(summary_rows).to_csv(folder / "boxes.csv", index=False)
-    (report_to / "BOXES.md").write_text("\n".join(lines) + "\n")
+    name = report_name(sorted(int(n) for n in rows.n.unique()))
+    (report_to / name).write_text("\n".join(lines) + "\n")
     head = lines.index("## Summary (update + pairs, on the boxes)")
     print("\n".join(lines[head:head + 4 + len(summary_rows)]))
-    print(f"\nwrote {folder / 'boxes.csv'}, {report_to / 'BOXES.md'}")
+    print(f"\nwrote {folder / 'boxes.csv'}, {report_to / name}")
     return 0
+
+
+def report_name(sizes: list[int]) -> str:
+    """BOXES.md for the default size; a run at other sizes writes beside it (BOXES-65536.md)."""
+    return "BOXES.md" if sizes == [DEFAULT_N] else "BOXES-" + "-".join(map(str, sizes)) + ".md"
 
 
 if __name__ == "__main__":

@@ -103,7 +103,8 @@ def test_the_boxes_study_sets_each_backend_on_boxes_beside_their_bounding_circle
     rows = pd.read_csv(out / "results.csv")
     assert set(rows[rows.experiment == "boxes"].backend) == {"own.grid", "own.sap"}
     assert set(rows[rows.experiment == "circles"].backend) == {"own.grid", "own.sap", "scipy.kdtree"}
-    md = (out / "BOXES.md").read_text()
+    md = (out / "BOXES-300.md").read_text()  # beside the default size's BOXES.md
+    assert boxes_study.report_name([4096]) == "BOXES.md" and not (out / "BOXES.md").exists()
     assert "## walls (2D), n = 300" in md
     summary = pd.read_csv(out / "boxes.csv")
     assert summary.circle_model_per_box_pair.iloc[0] > 1.5  # the walls' bounding circles overlap far more
