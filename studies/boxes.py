@@ -129,7 +129,10 @@ def tables(rows: pd.DataFrame) -> dict[tuple[str, int], pd.DataFrame]:
                                          for b in table.index]
         table["circles_status"] = circles["status"].reindex(table.index)
         circle_ranked = list(ok_lines(circles).sort_values("broad_ms").index)
-        table["circles_rank"] = [circle_ranked.index(b) + 1 if b in circle_ranked else None for b in table.index]
+        # NaN, not None, where a backend has no circle rank: the column stays numeric even where
+        # no backend finished on the circles (every one over the budget, as on the beams' spheres).
+        table["circles_rank"] = [circle_ranked.index(b) + 1 if b in circle_ranked else float("nan")
+                                 for b in table.index]
         out[family, int(n)] = table.sort_values(["status", "broad_ms"],
                                                 key=lambda c: c if c.name != "status" else (c != "ok"))
     return out

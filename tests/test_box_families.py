@@ -112,6 +112,19 @@ def test_the_boxes_study_sets_each_backend_on_boxes_beside_their_bounding_circle
     assert "| own.grid | " in table and "| scipy.kdtree |" not in table  # ranked on the boxes
 
 
+def test_the_boxes_report_stands_where_no_backend_finished_on_the_circles(tmp_path, capsys):
+    """As on the beams at n = 65536, whose bounding spheres took every backend over the budget."""
+    out = tmp_path / "boxes"
+    assert boxes_study.main(["--families", "walls", "--sizes", "300", "--frames", "1", "--repeat", "1",
+                             "--backends", "own.grid,own.sap", "--out", str(out)]) == 0
+    rows = pd.read_csv(out / "results.csv")
+    rows.loc[rows.experiment == "circles", "status"] = "skipped: a frame took 9 s, over the budget of 0.25 s per frame"
+    rows.to_csv(out / "results.csv", index=False)
+    assert boxes_study.main(["--report-only", "--out", str(out)]) == 0
+    table = (out / "BOXES-300.md").read_text().split("## walls (2D), n = 300", 1)[1]
+    assert "moves of 3 places or more): none." in table and "| 1 | own." in table
+
+
 @pytest.mark.parametrize("dim", [2, 3])
 def test_the_box_stress_scenes_leave_our_backends_exact(tmp_path, capsys, dim):
     """Walls across the world, a box as long as the world, boxes of zero width, aspect 1:1e6."""
