@@ -31,7 +31,7 @@ def ray_hit(origins, directions, lengths, q, positions, sizes, k):
     for balls (a vector of radii) and boxes (a matrix of half-extents), as common.half_of is."""
 
 
-@overload(ray_hit, inline="always")
+@overload(ray_hit)
 def _ray_hit(origins, directions, lengths, q, positions, sizes, k):
     if sizes.ndim == 1:
         return lambda origins, directions, lengths, q, positions, sizes, k: _ray_ball(
@@ -94,7 +94,7 @@ def point_inside(points, q, positions, sizes, k):
     """Whether object k's shape holds point q (its boundary too)."""
 
 
-@overload(point_inside, inline="always")
+@overload(point_inside)
 def _point_inside(points, q, positions, sizes, k):
     if sizes.ndim == 1:
         return lambda points, q, positions, sizes, k: _point_in_ball(points, q, positions, sizes, k)

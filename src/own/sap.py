@@ -19,8 +19,10 @@ from .radix import radix_argsort, sortable_bits
 from .skin import SkinSchedule, filter_pairs, largest_step
 from .small import SmallScenes
 from .statics import StaticsApart
-from .strips import strip_pairs, strip_pairs_parallel, strip_plan, strip_prepare
+from .strips import WIDTH_PAD, strip_pairs, strip_pairs_parallel, strip_plan, strip_prepare
+from .sweep_query import sweep_met
 
+NO_LENGTHS, NO_QUERY_ROWS = np.empty(0), np.empty((0, 2), dtype=np.int64)  # sweep_met's arrays a query has none of
 AXES = ("x", "y", "z", "auto")  # "z": spheres only
 SWEEPS = ("auto", "plain", "sparse")
 STRIPS = ("auto", "on", "off")
@@ -349,6 +351,7 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
     method = "sweep"
     dims = (2, 3)
     shapes = ("balls", "boxes")
+    answers = ("rays", "boxes", "points")  # along the sorted axis (own/sweep_query.py)
     sweeps = (Knob("axis", fixed(["x", "y", "auto"]), "sweep axis", dims=(2,)),
               Knob("axis", fixed(["x", "y", "z", "auto"]), "sweep axis", dims=(3,)),
               Knob("sweep", fixed(["plain", "sparse", "auto"]), "sweep"),
@@ -370,6 +373,7 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         if skin is not None and not (isinstance(skin, (int, float)) and np.isfinite(skin) and skin >= 0):
             raise ValueError(f"{self.name}: skin must be a distance >= 0, got {shown(skin)}")
         self._filter_collect = PairCollector()
+        self._query_collect = PairCollector()
 
     def _positions_to_reset(self, positions):
         pos = super()._positions_to_reset(positions)
@@ -592,6 +596,41 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         # plain until the next reset.
         self._float32_too_coarse |= crowded > MAX_CROWDED_SHARE * self.n
         return out
+
+    # Queries along the sorted axis (own/sweep_query.py), on the boxes as this frame's sweep
+    # sorted them (grown by half the skin around where the objects were: they hold them now).
+    def _closest_hits(self, origins, directions, lengths):
+        m = len(origins)
+        hit, at = np.full(m, -1, dtype=np.int64), np.full(m, np.inf)
+        sweep_met(0, origins, directions, lengths, *self._sorted_runs(), hit, at, NO_QUERY_ROWS)
+        return hit, at
+
+    def _every_hit(self, origins, directions, lengths):
+        return self._met_along_sweep(0, origins, directions, lengths)
+
+    def _boxes_met(self, lo, hi):
+        return self._met_along_sweep(1, lo, hi, NO_LENGTHS)
+
+    def _points_met(self, points):
+        return self._met_along_sweep(2, points, points, NO_LENGTHS)
+
+    def _met_along_sweep(self, kind, *queries):
+        no_hit, no_t = np.empty(0, dtype=np.int64), np.empty(0)
+        return self._query_collect(sweep_met, kind, *queries, *self._sorted_runs(), no_hit, no_t)[0]
+
+    def _sorted_runs(self):
+        """sweep_met's view of this frame's sort: the objects, the sorted bounds and their axis,
+        and the runs (the strips and the large bucket, or one run of every object)."""
+        n, axis = self.n, int(self._stats.get("axis", 0))  # no axis where nothing was sorted (n = 0)
+        if self._strips:
+            base, inv_height = self._strip_cut
+            runs = (self._strip_start[:self._strips + 2], self._strip_width[:self._strips + 1], self._strips, base,
+                    inv_height)
+        else:
+            halves = self._sweep_radii if self.shape == "balls" else self._sweep_radii[:, axis]
+            widest = 2.0 * float(halves.max()) * WIDTH_PAD if n else 0.0
+            runs = (np.array([0, n]), np.array([widest]), 1, 0.0, 0.0)
+        return (self._positions, self.radii, self._order[:n], self._bounds, axis, *runs)
 
     def structure(self):
         return {"intervals": self._bounds[:2].T, "axis": np.array(self._stats["axis"])}

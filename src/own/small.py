@@ -74,8 +74,7 @@ class SmallScenes:
 
     def __init_subclass__(cls, **kwargs) -> None:
         super().__init_subclass__(**kwargs)
-        for name, answer in (("stats", lambda self: dict(self._stats)), ("validate", lambda self: None),
-                             ("structure", lambda self: {})):
+        for name, answer in SMALL_ANSWERS.items():
             if name in cls.__dict__:
                 setattr(cls, name, _unless_small(cls.__dict__[name], answer))
 
@@ -106,26 +105,41 @@ class SmallScenes:
     def pairs(self):
         return super().pairs() if self._small is None else small_sweep(self._small, self.radii, self._order, self._lo)
 
-    # A small scene's queries test every object, as its pairs do (own/query_reference.py).
-    def _closest_hits(self, origins, directions, lengths):
-        if self._small is None:
-            return super()._closest_hits(origins, directions, lengths)
-        return closest_hits(origins, directions, lengths, self._small, self.radii)
+    # The query hooks of a structure defined below this mixin (own/tree.py's); those a subclass
+    # defines are wrapped by __init_subclass__.
+    def _closest_hits(self, *rays):
+        return self._small_or_structure("_closest_hits", rays)
 
-    def _every_hit(self, origins, directions, lengths):
-        if self._small is None:
-            return super()._every_hit(origins, directions, lengths)
-        return every_ray_hit(origins, directions, lengths, self._small, self.radii)
+    def _every_hit(self, *rays):
+        return self._small_or_structure("_every_hit", rays)
 
-    def _boxes_met(self, lo, hi):
-        return super()._boxes_met(lo, hi) if self._small is None else boxes_meeting(lo, hi, self._small, self.radii)
+    def _boxes_met(self, *boxes):
+        return self._small_or_structure("_boxes_met", boxes)
 
-    def _points_met(self, points):
-        return super()._points_met(points) if self._small is None else points_inside(points, self._small, self.radii)
+    def _points_met(self, *points):
+        return self._small_or_structure("_points_met", points)
+
+    def _small_or_structure(self, hook: str, args: tuple):
+        if self._small is not None:
+            return SMALL_ANSWERS[hook](self, *args)
+        return getattr(super(), hook)(*args)
+
+
+# What a small scene answers in place of its structure: no structure to count, check or draw, and
+# its queries test every object, as its pairs do (own/query_reference.py).
+SMALL_ANSWERS: dict[str, Callable] = {
+    "stats": lambda self: dict(self._stats),
+    "validate": lambda self: None,
+    "structure": lambda self: {},
+    "_closest_hits": lambda self, *rays: closest_hits(*rays, self._small, self.radii),
+    "_every_hit": lambda self, *rays: every_ray_hit(*rays, self._small, self.radii),
+    "_boxes_met": lambda self, lo, hi: boxes_meeting(lo, hi, self._small, self.radii),
+    "_points_met": lambda self, points: points_inside(points, self._small, self.radii),
+}
 
 
 def _unless_small(method: Callable, answer: Callable) -> Callable:
     @functools.wraps(method)
     def wrapper(self, *args, **kwargs):
-        return answer(self) if self._small is not None else method(self, *args, **kwargs)
+        return answer(self, *args, **kwargs) if self._small is not None else method(self, *args, **kwargs)
     return wrapper
