@@ -240,6 +240,22 @@ def test_a_structure_finds_the_closest_hit_among_many_overlapping_shapes(name, d
     assert_answers_as_the_reference(backend, positions, sizes, origins, directions, lengths, lo, lo + 1.0, lo)
 
 
+@pytest.mark.parametrize("name", STRUCTURES)
+def test_a_ray_whose_end_overflows_a_double_still_finds_its_hits(name):
+    """A ray from 1e308 of length 1e308 ends at infinity: its box is unbounded (a sweep's single
+    run once read it as NaN and skipped every box)."""
+    positions = np.array([[0.0, 1.0e308], [0.0, 1.2e308], [50.0, 1.2e308]] + [[k * 10.0, 0.0] for k in range(70)])
+    extents = np.ones_like(positions)  # boxes: the slabs square nothing, so the hit is exact out there
+    backend = engines.create(name, **({"axis": "x"} if name.startswith("own.sap") else {}))  # the ray across it
+    backend.small_scene_n = 0
+    backend.reset(positions, extents=extents)
+    origins, directions = np.array([[0.0, 0.9e308]]), np.array([[0.0, 1.0]])
+    lo, hi = np.array([[-1.0, 1.1e308]]), np.array([[1.0, 1.7e308]])
+    assert_answers_as_the_reference(backend, positions, extents, origins, directions, np.array([1.0e308]), lo, hi,
+                                    positions[:1])
+    assert backend.raycast(origins, directions, 1.0e308)[0].tolist() == [0]
+
+
 def test_a_backend_that_answers_no_queries_says_so_in_one_line():
     backend = engines.create("own.grid")
     backend.reset(np.zeros((3, 2)), np.ones(3))

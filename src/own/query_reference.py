@@ -52,10 +52,10 @@ def _ray_ball(origins, directions, lengths, q, positions, radii, k):
     if cc <= 0.0:  # the origin inside (or on) the ball
         return 0.0
     disc = b * b - cc
-    if b > 0.0 or disc < 0.0:  # heading away, or passing by
+    if b > 0.0 or not disc >= 0.0:  # heading away, or passing by (or squares past a double: NaN)
         return np.inf
-    t = max(-b - np.sqrt(disc), 0.0)
-    return t if t <= lengths[q] else np.inf
+    t = -b - np.sqrt(disc)
+    return max(t, 0.0) if t <= lengths[q] else np.inf
 
 
 @nb.njit(cache=True, inline="always")

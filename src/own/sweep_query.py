@@ -36,8 +36,12 @@ def _query_box(kind, a0, a1, a2, q, qlo, qhi):
 
 @nb.njit(cache=True, inline="always")
 def _strip_of(v, base, inv_height, strips):
-    """The strip of coordinate v (strips.py's rule), -1 below the first, the last above it."""
-    return int(np.floor(min(max((v - base) * inv_height, -1.0), strips - 1.0)))
+    """The strip of coordinate v (strips.py's rule), -1 below the first, the last above it; 0
+    where there is one run (inv_height 0), even for a ray's end at infinity (inf * 0: NaN)."""
+    x = (v - base) * inv_height
+    if x != x:
+        return 0
+    return int(np.floor(min(max(x, -1.0), strips - 1.0)))
 
 
 @nb.njit(cache=True)
