@@ -59,10 +59,9 @@ class StaticsApart:
     _statics_queried: tuple[np.ndarray, object] | None = None
 
     def _new_statics_answerer(self):
-        """An empty backend that answers queries on the statics: an exact tree (own.bvh, no skin)."""
-        from .bvh import LinearBvh  # bvh.py builds on this module
-
-        return LinearBvh(coherent=False)
+        """An empty backend that answers queries on the statics: each class that answers queries
+        names one (an exact own.bvh for our structures; own.brute's own kind for own.brute)."""
+        raise NotImplementedError(f"{self.name} names no backend to answer queries on its statics")
 
     def _statics_answerer(self):
         """(ids, backend) answering queries on the statics alive now, or None where there are none."""
