@@ -323,15 +323,9 @@ def large_against_strips(order, s_lo, s_hi, o_lo, o_hi, strip_start, strip_width
         bottom, top, lo_a, hi_a, i = s_lo[a], s_hi[a], o_lo[a], o_hi[a], order[a]
         k0 = max(_strip(lo_a, base, inv_height, last) - 1, 0)
         for k in range(k0, _strip(hi_a, base, inv_height, last) + 1):
-            reach = bottom - strip_width[k]
-            lo, hi = strip_start[k], strip_start[k + 1]
-            while lo < hi:  # the first slot of the strip starting at or after `reach`
-                mid = (lo + hi) >> 1
-                if s_lo[mid] < reach:
-                    lo = mid + 1
-                else:
-                    hi = mid
-            b, end = lo, strip_start[k + 1]
+            lo, end = strip_start[k], strip_start[k + 1]
+            lo += np.searchsorted(s_lo[lo:end], bottom - strip_width[k])  # the first that can reach it
+            b = lo
             while b < end and s_lo[b] <= top:
                 emit(buf, count, i, order[b])
                 count += (o_lo[b] <= hi_a) & (o_hi[b] >= lo_a) & (s_hi[b] >= bottom)

@@ -68,15 +68,8 @@ def sweep_met(kind, a0, a1, a2, positions, sizes, order, bounds, axis, strip_sta
         for k in range(k0, buckets):
             if k > k1 and k < strips:
                 continue  # past the strips the query spans: on to the large bucket
-            reach = s_lo - strip_width[k]
-            lo, hi = strip_start[k], strip_start[k + 1]
-            while lo < hi:  # the first box of the run starting at or after `reach`
-                mid = (lo + hi) >> 1
-                if bounds[0, mid] < reach:
-                    lo = mid + 1
-                else:
-                    hi = mid
-            b, end = lo, strip_start[k + 1]
+            b, end = strip_start[k], strip_start[k + 1]
+            b += np.searchsorted(bounds[0, b:end], s_lo - strip_width[k])  # the first box that can reach it
             while b < end and bounds[0, b] <= s_hi:
                 meets = bounds[1, b] >= s_lo
                 for m in range(1, d):
