@@ -256,10 +256,49 @@ def test_a_ray_whose_end_overflows_a_double_still_finds_its_hits(name):
     assert backend.raycast(origins, directions, 1.0e308)[0].tolist() == [0]
 
 
+@pytest.mark.parametrize("name, params", [("own.grid", {"cell": 10.0}), ("own.grid", {"p": 7}),
+                                          ("own.grid_incremental", {"cell": 10.0, "candidates": "kept"}),
+                                          ("own.verlet", {"skin": 0.0})])
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("shift", [0.0, 0.5])
+def test_a_grid_answers_rays_along_its_cell_lines_and_through_its_corners(name, params, dim, shift):
+    """Balls of diameter one cell on a lattice of the cells' size, so that they touch: rays along
+    the lattice's lines, grazing the balls either side, through the corners, from outside the
+    layout and ending on a shape; boxes whose edges touch the balls'. The layout starts at the
+    lowest centre: the lattice's (its centres at the top of their cells, the cells a margin wider
+    than a ball) or, shifted, one ball's half a unit below it (the centres at the bottom)."""
+    corners = np.stack(np.meshgrid(*[np.arange(6) * 10.0] * dim, indexing="ij"), axis=-1).reshape(-1, dim)
+    if shift:
+        corners = np.vstack([corners, np.full((1, dim), -shift)])
+    radii = np.full(len(corners), 5.0)
+    backend = engines.create(name, **params)
+    backend.small_scene_n = 0
+    backend.reset(corners, radii)
+    backend.update(corners)
+    if name == "own.grid_incremental":
+        assert backend.stats()["plain_search"] == 0, "the kept candidates' lists were not the ones queried"
+    lines = np.arange(-1, 8) * 10.0
+    origins, directions = [], []
+    for c in (lines[:, None] + [-5.0, -4.99, 0.0, 4.99, 5.0]).ravel():  # on the lines, grazing the balls either side
+        for axis in range(dim):
+            o = np.full(dim, -25.0)
+            o[(axis + 1) % dim] = c  # along axis `axis`, on a cell line of the next axis
+            u = np.zeros(dim)
+            u[axis] = 1.0
+            origins += [o, o + 100.0 * u]
+            directions += [u, -u]
+        origins += [np.full(dim, c), np.full(dim, -c)]  # diagonals through the corners, each way
+        directions += [np.ones(dim), -np.ones(dim)]
+    origins, directions = np.array(origins), np.array(directions)
+    lengths = np.resize([0.0, 5.0, 20.0, 35.0, 200.0], len(origins))
+    lo = np.array([[c] * dim for c in lines]) + 5.0  # touching the balls' boxes from above
+    assert_answers_as_the_reference(backend, corners, radii, origins, directions, lengths, lo, lo + 10.0, lo - 5.0)
+
+
 def test_a_backend_that_answers_no_queries_says_so_in_one_line():
-    backend = engines.create("own.grid")
+    backend = engines.create("own.grid_swept")
     backend.reset(np.zeros((3, 2)), np.ones(3))
-    one_line = r"^own\.grid answers no (ray|box|point) queries \(nor any other\)$"
+    one_line = r"^own\.grid_swept answers no (ray|box|point) queries \(nor any other\)$"
     for call, args in ((backend.raycast, ([[0, 0]], [[1, 0]], 1.0)), (backend.query_boxes, ([[0, 0]], [[1, 1]])),
                        (backend.query_points, ([[0, 0]],))):
         with pytest.raises(NotImplementedError, match=one_line):

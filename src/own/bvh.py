@@ -124,9 +124,6 @@ class LinearBvh(StaticsApart, SmallScenes, MortonTree):
         self._capacity = self._int_param("leaf_size", 1)
         self._depth = MORTON_BITS
 
-    def _new_statics_answerer(self):
-        return LinearBvh(coherent=False)  # exact: no skin, as the statics never move
-
     def structure(self):
         """Each node's box, its lows then its highs ((x0, y0, x1, y1) over circles)."""
         return {"nodes": np.hstack([self._bounds[:, 0::2], self._bounds[:, 1::2]])}

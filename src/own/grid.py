@@ -38,9 +38,11 @@ from .common import (PairCollector, cell_of, centre_extents, copy_size, emit, ha
                      row_of, set_halves, widest_half, widest_halves)
 from .compress import NATIVE, SLACK_ROWS, scan_compressed
 from .dimension import marker
+from .grid_query import CellQueries, slot_cells
 from .large_cover import COVER_FROM, pairs_among_covered
 from .small import SmallScenes
 from .static_boxes import StaticBoxCells
+from .statics_queries import StaticsQueried
 
 # The grid has at most this many cells per object (cells are enlarged to fit), so tiny radii in a
 # huge box cannot allocate an unbounded grid. The cap should rarely bind at useful densities: at
@@ -727,14 +729,22 @@ def large_key(layout: np.ndarray, d: int) -> int:
     return (int(layout[3 * d - 1]) + 1) * key_strides(layout, d)[-1]
 
 
+def cell_key_origin(layout: np.ndarray, d: int) -> tuple[np.ndarray, int]:
+    """(the key stride of each axis, the key of cell 0 on every axis): cell (i, j, k)'s key is the
+    second plus i, j, k times the strides (key_space's padding is in it), from Python."""
+    strides = np.array(key_strides(layout, d), dtype=np.int64)
+    pad = np.array([1 if 0 < a < d - 1 else 0 for a in range(d)])
+    return strides, 1 + int(pad @ strides)
+
+
 def cell_keys(positions: np.ndarray, layout: np.ndarray) -> np.ndarray:
     """The key of the cell holding each centre, derived in numpy apart from the kernels' cell_key,
     for the validate checks."""
     d = positions.shape[1]
     origin, width, count = layout[:d], layout[d:2 * d], layout[2 * d:]
     cell = np.clip(np.floor((positions - origin) * (1.0 / width)), 0, count - 1).astype(np.int64)
-    pad = np.array([1 if 0 < a < d - 1 else 0 for a in range(d)])
-    return 1 + (cell + pad) @ np.array(key_strides(layout, d))
+    strides, first = cell_key_origin(layout, d)
+    return first + cell @ strides
 
 
 def default_cell(sizes: np.ndarray) -> float:
@@ -772,12 +782,12 @@ def live_sizes(sizes: np.ndarray, alive: np.ndarray | None) -> np.ndarray:
     return np.where(alive if sizes.ndim == 1 else alive[:, None], sizes, np.nan)
 
 
-class CellLayout(SmallScenes, BroadPhase):
+class CellLayout(SmallScenes, CellQueries, BroadPhase):
     """What the grids share: the `p` and `cell` parameters, checked, the layout they start, and
     the cells for drawing. Give `p` for p x p cells over the extent (the essay's parameter) or
     `cell` for a cell size; with neither, a cell is one diameter of the largest object of at
     most 4 median radii (see `default_cell`), enlarged to at most MAX_CELLS_PER_OBJECT cells per
-    object."""
+    object. Rays, boxes and points are answered through the cells (own/grid_query.py)."""
 
     method = "grid"
     sweeps = (GRID_CELL,)
@@ -819,7 +829,7 @@ class CellLayout(SmallScenes, BroadPhase):
         return {"cells": np.column_stack([ox + cx * cw, oy + cy * ch, ox + (cx + 1) * cw, oy + (cy + 1) * ch])}
 
 
-class SquareGrid(CellLayout):
+class SquareGrid(StaticsQueried, CellLayout):
     """own.grid over circles: a uniform grid of square cells over the centres, half-stencil pair search.
 
     `p` and `cell` as in CellLayout. Objects wider than a cell are handled separately at a cost
@@ -957,6 +967,13 @@ class SquareGrid(CellLayout):
             cross, self._counters["static_tests"] = self._statics.pairs_with(ids, centres, sradii, movers)
             out = np.concatenate([out, cross])
         return out
+
+    def _query_cells(self):
+        ids = self._slots[0]
+        if not len(ids):  # every object static: the statics answer (StaticsQueried)
+            return self._positions[:0], self.radii[:0], None
+        return self._positions, self.radii, slot_cells(self._layout, *cell_key_origin(self._layout, self.dim), ids,
+                                                       self._start, self._large_key())
 
     def stats(self):
         if not self._counters:  # nothing built yet

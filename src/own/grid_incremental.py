@@ -30,8 +30,10 @@ from interface.base import size_keyword
 
 from .common import PairCollector, centre_extents, copy_size, emit, widest_half
 from .dimension import marker
-from .grid import (CellLayout, UniformGrid, above, cell_key, cell_keys, covered_cells, first_row, gather_centres,
-                   grid_layout, key_space, key_strides, large_against_large, large_key, next_row, rows_in, small_limit)
+from .grid import (CellLayout, UniformGrid, above, cell_key, cell_key_origin, cell_keys, covered_cells, first_row,
+                   gather_centres, grid_layout, key_space, key_strides, large_against_large, large_key, next_row,
+                   rows_in, small_limit)
+from .grid_query import listed_cells
 from .kept_lists import (CANDIDATE_RANK, LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT,
                          add_candidate, boxes_overlap, drop_moved, link_runs, move, new_state, unpack)
 from .statics import StaticsApart
@@ -492,6 +494,18 @@ class IncrementalGrid(StaticsApart, CellLayout):
 
     def structure(self):
         return self._plain.structure() if self._plain is not None else super().structure()
+
+    def _query_cells(self):
+        """The plain search's cells, or the kept candidates' lists, read where they are."""
+        if self._plain is not None:
+            return self._plain._query_cells()
+        if not len(self._head):  # no cells laid out (no objects held)
+            return self._positions, self.radii, None
+        perm, rkey, nxt = self._state[0][0], self._state[0][2], self._state[0][3]
+        strides, base = cell_key_origin(self._layout, self.dim)
+        first_large = first_large_rank(rkey, large_key(self._layout, self.dim))
+        return self._positions, self.radii, listed_cells(self._layout, strides, base, perm, self._head, nxt,
+                                                         int(strides[-1]), first_large)
 
     def validate(self):
         if self._plain is not None:

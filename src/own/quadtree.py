@@ -32,7 +32,6 @@ import numpy as np
 
 from interface.knobs import Knob, fixed
 
-from .bvh import LinearBvh
 from .common import widest_half
 from .morton import STEP_BITS, bit_length, interleave, pack_steps
 from .small import SmallScenes
@@ -167,9 +166,6 @@ class Quadtree(StaticsApart, SmallScenes, MortonTree):
         cells = [_deinterleave(int(c) >> (2 * (self._depth - d))) for c, d in zip(codes[starts], depth)]
         cx, cy = np.array(cells, dtype=np.int64).reshape(-1, 2).T
         return depth, cx, cy
-
-    def _new_statics_answerer(self):
-        return LinearBvh(coherent=False)  # the statics' queries: an exact tree, as own.bvh's
 
     def structure(self):
         """Each node's cell (the one lattice cell holding its slice) as a rectangle (none drawn for

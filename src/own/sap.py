@@ -10,7 +10,6 @@ from interface.base import BroadPhase
 from interface.checks import shown
 from interface.knobs import Knob, fixed
 
-from .bvh import LinearBvh
 from .coherent import RepairSchedule
 from .columns import COLUMN_PAD, COLUMNS_FROM_WINDOW, column_prepare, column_sweep
 from .common import PairCollector, emit, gather, half_of, insertion_sort
@@ -618,9 +617,6 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
     def _met_along_sweep(self, kind, *queries):
         no_hit, no_t = np.empty(0, dtype=np.int64), np.empty(0)
         return self._query_collect(sweep_met, kind, *queries, *self._sorted_runs(), no_hit, no_t)[0]
-
-    def _new_statics_answerer(self):
-        return LinearBvh(coherent=False)  # the statics' queries: an exact tree, as own.bvh's
 
     def _sorted_runs(self):
         """sweep_met's view of this frame's sort: the objects, the sorted bounds and their axis,

@@ -27,6 +27,7 @@ from interface.knobs import Knob, fixed, mean_diameter, sizes
 from .common import PairCollector
 from .dimension import marker
 from .grid import UniformGrid
+from .grid_query import CellQueries
 from .skin import SkinSchedule, filter_pairs, skin_used
 from .statics import StaticsApart
 
@@ -40,11 +41,13 @@ DEFAULT_SKIN_DIAMETERS, LARGEST_SKIN_DIAMETERS = 0.25, 1.0
 TRIAL_FRAMES = 40
 
 
-class VerletList(StaticsApart, BroadPhase):
+class VerletList(StaticsApart, CellQueries, BroadPhase):
     """Verlet neighbour list over our exact grid; `skin` (default a quarter of a mean diameter, adapting), `every`
     (None: rebuild when an object has moved skin / 2, exact; k: every k frames, approximate),
     `precision` ("float64", or "float32": inputs rounded first, approximate), `fat` (True: the
-    fat-box pairs, untested)."""
+    fat-box pairs, untested). Queries go through the list's grid, whose cells hold the fat boxes
+    as they were at the build: they hold the shapes now while the rule holds (with `every`, a
+    query misses what outran the skin, as the pairs do)."""
 
     name, method = "own.verlet", "grid"
     dims = (2, 3)
@@ -144,6 +147,11 @@ class VerletList(StaticsApart, BroadPhase):
         out, _ = self._collect(filter_pairs, self._list, self._positions, self._radii, self._dim)
         self._overlapping = len(out)
         return out
+
+    def _query_cells(self):
+        grid = self._grid
+        cells = None if grid._small is not None else grid._query_cells()[2]
+        return self._positions, self._radii, cells
 
     def validate(self):
         """While the rule holds, the list holds every current overlap."""
