@@ -10,6 +10,7 @@ COMMANDS = {
     "stress": "stiff and extreme scenes: which backend breaks, and how",
     "scenes": "every backend on every scene family, the essay's motion and recorded (pile, rain, ...)",
     "boxes": "every backend on the box families, as boxes and as their bounding circles",
+    "queries": "rays, box and point queries a frame, timed beside the pairs and checked",
     "scale": "how each backend's cost per frame grows with n, up to 2^20",
     "bench": "our backends against the speed targets on this machine",
     "tune": "sweep each backend's parameters on a scene; check our defaults",

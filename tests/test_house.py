@@ -21,7 +21,7 @@ from test_own_exact import EXACT
 
 ROOT = Path(__file__).resolve().parents[1]
 # The commands that measure and write rows: each offers the whole output vocabulary.
-ROW_WRITERS = ["compare", "essay", "stress", "scale", "tune", "recommend"]
+ROW_WRITERS = ["compare", "essay", "stress", "scale", "tune", "recommend", "queries"]
 
 
 def test_every_backend_belongs_to_a_registered_family():
