@@ -13,6 +13,7 @@ pairs may walk many cells for a long ray, a sweep answers a region by scanning i
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import pandas as pd
@@ -70,7 +71,7 @@ def parse(argv: list[str] | None):
     unknown = [s for s in names if s not in SET_NAMES]
     if unknown or not names:
         raise CliError(f"--sets: unknown {', '.join(unknown) or 'none given'}; the sets are {', '.join(SET_NAMES)}")
-    args.query_sets = tuple(s for s in QUERY_SETS if s.label in names)
+    args.query_sets = tuple(replace(s, count=args.queries) for s in QUERY_SETS if s.label in names)
     args.size_list = size_list(args.sizes)
     for n in args.size_list:  # before --out is touched
         problem = size_problem(n, args.frames + 1, dim=dim_of(args))
@@ -114,7 +115,7 @@ def main(argv: list[str] | None = None) -> int:
                 scene = at_essay_density(family, n, dim=dim)
                 jobs += [Job(backend, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout,
                              memory_mb=args.memory, scene=scene, frames=args.frames, tag={"label": family},
-                             verify=VERIFIED_FRAMES, queries=args.query_sets, query_count=args.queries)
+                             verify=VERIFIED_FRAMES, queries=args.query_sets)
                          for backend in (box_runnable if family in boxes else runnable)]
         with runner:
             runner.run_all(jobs, desc="families x backends, pairs and queries")

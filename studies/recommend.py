@@ -3,9 +3,12 @@
 Give a scene file (`--scene FILE.csv`) or describe the scene (`--n`, `--dist`, `--radius` /
 `--radii`, `--speed`). Every available backend runs short trials on the stepped scene; those with
 knobs are tuned on it; all are ranked by time per frame end to end over a run (each repeat's
-mean frame, the median over repeats), with the spread over repeats. Backends whose spreads overlap are tied, not ranked; a backend that missed any pair is
-flagged and never recommended. Prints a verdict in plain words and writes it as Markdown with a
-figure, the rows and meta.json to `--out`.
+mean frame, the median over repeats), with the spread over repeats. A project that asks its
+structure for rays or region queries every frame says how many (`--rays`, `--box-queries`): each
+frame then asks them after its pairs, the time of the whole frame decides, and the verdict says
+whether the pairs or the queries did. Backends whose spreads overlap are tied, not ranked; a
+backend that missed any pair (or any hit of a query) is flagged and never recommended. Prints a
+verdict in plain words and writes it as Markdown with a figure, the rows and meta.json to `--out`.
 """
 
 from __future__ import annotations
@@ -14,21 +17,23 @@ import json
 import math
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import engines
 from interface.knobs import frames_needed
 from scenes.costs import costs
 
-from .lib.cli import CliError, Parser, command_line, in_dimension, matched_backends, run_cli, warn_unavailable
+from .lib.cli import (CliError, Parser, command_line, compact_names, in_dimension, matched_backends, run_cli,
+                      warn_unavailable)
 from .lib.figures import backend_colour, new_figure, save
 from .lib.harness import Job, Outcome, scene_columns
 from .lib.options import (add_backends_option, add_output_options, add_scene_options, add_trial_options, parse_checked,
                           scene_from_args)
 from .lib.output import Output, read_meta, write_json
 from .lib.pool import Pool
-from .lib.results import RowWriter, stored_runs
+from .lib.query_runs import QUERY_SETS, QuerySet, query_columns
+from .lib.results import COLUMNS, RowWriter, stored_runs
 from .lib.runner import Runner
 from .lib.traits import CLUMPED, ELONGATED, MIXED_SPREAD, Traits, measure_traits
 from .lib.trials import Trial, warm_up
@@ -122,8 +127,8 @@ def params_text(entry: Entry) -> str:
     return params_words(entry.trial.params)
 
 
-def verdict(groups: list[list[Entry]], entries: list[Entry], traits: Traits) -> list[str]:
-    """The recommendation in plain words."""
+def verdict(groups: list[list[Entry]], entries: list[Entry], traits: Traits, queries: str = "") -> list[str]:
+    """The recommendation in plain words; `queries`: what each frame asked besides its pairs, in words."""
     lines = [f"Scene: {', '.join(traits.words())}."]
     if not groups:
         return lines + [nothing_finished(entries)]
@@ -133,6 +138,8 @@ def verdict(groups: list[list[Entry]], entries: list[Entry], traits: Traits) -> 
                  f"(repeats {win.trial.low_ms:.3g} to {win.trial.high_ms:.3g}).")
     if win.max_error > 0:
         lines.append(allowance(win, entries))
+    if win.trial.queries_ms:
+        lines.append(decided_by(win, [e for group in groups for e in group], queries))
     if len(top) > 1:
         others = ", ".join(f"{e.backend} ({e.trial.median_ms:.3g} ms)" for e in top[1:])
         lines.append(f"Tied with it within the run-to-run spread: {others}; any of them will do.")
@@ -147,6 +154,27 @@ def verdict(groups: list[list[Entry]], entries: list[Entry], traits: Traits) -> 
         lines.append("Never recommended, missed pairs: " + ", ".join(f"{e.backend} ({e.trial.missed} missed)"
                                                                   for e in flagged) + ".")
     return lines
+
+
+def decided_by(win: Entry, eligible: list[Entry], queries: str) -> str:
+    """Whether the pairs or the queries decided: the fastest for the pairs alone (update, pairs and
+    narrow phase, the frame less its queries) against the winner."""
+    def pairs_ms(e: Entry) -> float:
+        return e.trial.median_ms - e.trial.queries_ms
+
+    alone = min(eligible, key=pairs_ms)
+    share = win.trial.queries_ms / win.trial.median_ms
+    if alone is win:
+        return (f"The pairs decided: {win.backend} is also the fastest for the pairs alone "
+                f"({pairs_ms(win):.3g} ms); {queries} take {win.trial.queries_ms:.3g} ms of its frame ({share:.0%}).")
+    return (f"The queries decided: {alone.backend} is the fastest for the pairs alone ({pairs_ms(alone):.3g} ms "
+            f"against {pairs_ms(win):.3g}), but {queries} take it {alone.trial.queries_ms:.3g} ms a frame against "
+            f"{win.trial.queries_ms:.3g} for {win.backend}.")
+
+
+def asked_words(sets: tuple[QuerySet, ...]) -> str:
+    """What each frame asks besides its pairs, e.g. "1000 rays across the world"."""
+    return " and ".join(f"{s.count} {QUERY_WORDS[s.label]}" for s in sets)
 
 
 def allowance(win: Entry, entries: list[Entry]) -> str:
@@ -301,8 +329,28 @@ def parser() -> Parser:
     p.add_argument("--max-error", type=float, default=0.0, metavar="E",
                    help="recommend the fastest setting that misses at most this share of the true contacts "
                         "(default 0: none missed; tuning then tries the settings that trade accuracy for speed)")
+    q = p.add_argument_group("queries a frame asks besides its pairs")
+    q.add_argument("--rays", type=int, default=0, metavar="N",
+                   help="rays a frame whose closest hit the project asks (default 0)")
+    q.add_argument("--ray-length", choices=tuple(RAY_SETS), default="across",
+                   help="their length: short (4 mean diameters), quarter (of the world), across (the world) "
+                        "(default across)")
+    q.add_argument("--box-queries", type=int, default=0, metavar="N",
+                   help="box queries a frame (every object overlapping a box) the project asks (default 0)")
+    q.add_argument("--box-size", choices=tuple(BOX_SETS), default="medium",
+                   help="their size: small (1 mean diameter), medium (4), large (16) (default medium)")
     add_output_options(p, "recommend")
     return p
+
+
+def asked_sets(args) -> tuple[QuerySet, ...]:
+    """The query sets of the options, each with its count a frame."""
+    sets = []
+    if args.rays:
+        sets.append(replace(RAY_SETS[args.ray_length], count=args.rays))
+    if args.box_queries:
+        sets.append(replace(BOX_SETS[args.box_size], count=args.box_queries))
+    return tuple(sets)
 
 
 def parse(argv: list[str] | None):
@@ -311,6 +359,10 @@ def parse(argv: list[str] | None):
         raise CliError("--time-limit must be positive")
     if not 0 <= args.max_error < 1:
         raise CliError("--max-error must be a share of the contacts, 0 <= E < 1")
+    for option in ("rays", "box_queries"):
+        if getattr(args, option) < 0:
+            raise CliError(f"--{option.replace('_', '-')} must be a count >= 0, got {getattr(args, option)}")
+    args.query_sets = asked_sets(args)
     return args
 
 
@@ -325,6 +377,7 @@ class Trials:
         self.max_error = args.max_error
         self.timeout_cap = args.timeout or 120.0
         self.budget_cap = args.budget or float("inf")
+        self.queries = args.query_sets
 
     def job(self, backend, params, step, repeats=None, frames=None, budget=float("inf"), share=1) -> Job:
         left = self.deadline - time.perf_counter()
@@ -332,7 +385,8 @@ class Trials:
         frames = frames or self.frames
         verify = None if self.verify is None else tuple(f for f in self.verify if f <= frames) or (1,)
         return Job(backend, dict(params), repeats=repeats or self.repeats, budget_s=min(budget, self.budget_cap),
-                   timeout_s=timeout, scene=self.scene, frames=frames, tag={"experiment": step}, verify=verify)
+                   timeout_s=timeout, scene=self.scene, frames=frames, tag={"experiment": step}, verify=verify,
+                   queries=self.queries)
 
     def run(self, job: Job) -> Trial:
         """One trial; it may use twice its fair share of the time left."""
@@ -385,14 +439,16 @@ def main(argv: list[str] | None = None) -> int:
     chosen = in_dimension(matched_backends(args.backends), scene.dim, scene.shape)
     with Output(args.out, "recommend", command_line("recommend", argv), args.resume) as out:
         missing = warn_unavailable(chosen)
-        backends = run_order([b for b in chosen if b not in missing])
+        backends = run_order(answering([b for b in chosen if b not in missing], args.query_sets))
         start = time.perf_counter()
         deadline = start + args.time_limit - REPORT_S
         # The trials leave TUNE_SHARE of the time to tuning, which can still change the winner.
         trials_deadline = deadline if args.no_tune else start + (1 - TUNE_SHARE) * (args.time_limit - REPORT_S)
-        writer = RowWriter(out.path, args.resume)
+        writer = RowWriter(out.path, args.resume, columns=COLUMNS + query_columns(args.query_sets))
         runner = Runner(writer, out, pool=Pool.from_args(args))
         frames, repeats, notes, verify = plan_trials(runner, scene, args, len(backends))
+        if args.query_sets:
+            notes.append(f"Each frame asks {asked_words(args.query_sets)} after its pairs; the whole frame is timed.")
         traj = runner.trajectory(scene, frames + 1, verify)
         traits = measure_traits(traj)
         print(f"scene {scene.name}: {', '.join(traits.words())}")
@@ -420,7 +476,7 @@ def main(argv: list[str] | None = None) -> int:
             notes.append(f"Not available here: {', '.join(missing)}.")
         meta = out.meta(scene=scene_columns(traj.scene), traits=vars(traits), frames=frames, repeats=repeats,
                         verified=list(verify) if verify else None, time_limit=args.time_limit,
-                        max_error=args.max_error,
+                        max_error=args.max_error, queries=[vars(q) for q in args.query_sets],
                         unavailable=missing, not_tried=skipped, notes=notes,
                         entries=[{"backend": e.backend, "job": e.job, "tuned": e.tuned, "note": e.note,
                                   "defaults_job": e.defaults.key if e.defaults else None,
@@ -428,6 +484,28 @@ def main(argv: list[str] | None = None) -> int:
     finish(out.path, entries, meta, Traits(**meta["traits"]))
     print(f"({time.perf_counter() - start:.0f} s)")
     return 0
+
+
+# The sets --rays and --box-queries pick from (studies/lib/query_runs.py), and how the verdict names them.
+RAY_SETS = {"short": QUERY_SETS[0], "quarter": QUERY_SETS[1], "across": QUERY_SETS[2]}
+BOX_SETS = {"small": QUERY_SETS[3], "medium": QUERY_SETS[4], "large": QUERY_SETS[5]}
+QUERY_WORDS = {"rays_short": "rays of 4 diameters", "rays_quarter": "rays a quarter of the world long",
+               "rays_across": "rays across the world", "boxes_small": "box queries of 1 diameter",
+               "boxes_medium": "box queries of 4 diameters", "boxes_large": "box queries of 16 diameters",
+               "points": "point queries"}
+
+
+def answering(backends: list[str], sets: tuple[QuerySet, ...]) -> list[str]:
+    """The backends that answer every kind of query asked; the others named in one line as not tried."""
+    kinds = {s.kind for s in sets}
+    silent = [b for b in backends if not kinds <= set(engines.backend_class(b).answers)]
+    if silent:
+        print(f"not tried, they answer no {' or '.join(sorted(kinds))} queries: {', '.join(compact_names(silent))}")
+    kept = [b for b in backends if b not in silent]
+    if not kept:
+        raise CliError(f"none of the backends chosen answers {' and '.join(sorted(kinds))} queries; "
+                       "see `answers` in the README's table")
+    return kept
 
 
 def plan_trials(runner: Runner, scene, args, backends: int) -> tuple[int, int, list[str], tuple[int, ...] | None]:
@@ -463,7 +541,7 @@ def plan_trials(runner: Runner, scene, args, backends: int) -> tuple[int, int, l
 def finish(folder: Path, entries: list[Entry], meta: dict, traits: Traits) -> None:
     """Rank, print the verdict, and write recommend.md, recommend.png and the ranking in meta.json."""
     groups = rank(entries)
-    lines = verdict(groups, entries, traits)
+    lines = verdict(groups, entries, traits, asked_words(stored_sets(meta)))
     print()
     print("\n".join(lines))
     for note in meta["notes"][1:]:
@@ -477,9 +555,15 @@ def finish(folder: Path, entries: list[Entry], meta: dict, traits: Traits) -> No
     print(f"\nwrote {folder / 'recommend.md'}, recommend.png, results.csv, meta.json")
 
 
+def stored_sets(meta: dict) -> tuple[QuerySet, ...]:
+    """The query sets a run asked, from its meta.json (none before queries were asked)."""
+    return tuple(QuerySet(**q) for q in meta.get("queries", []))
+
+
 def report_only(folder: Path) -> int:
     """The verdict and files again from the rows and meta.json of an earlier run."""
-    meta, stored = read_meta(folder), stored_runs(folder)
+    meta = read_meta(folder)
+    stored = stored_runs(folder, COLUMNS + query_columns(stored_sets(meta)))
     if "entries" not in meta:
         raise CliError(f"{folder} holds no finished recommendation (meta.json lists no trials)")
 
@@ -487,7 +571,7 @@ def report_only(folder: Path) -> int:
         if not key:
             return None
         rows, measured = stored.get(key, []), json.loads(key)
-        job = Job(measured["backend"], measured["params"])
+        job = Job(measured["backend"], measured["params"], queries=stored_sets(meta))
         return Trial.of(job, Outcome(job.backend, rows[-1]["status"] if rows else "not measured", rows))
 
     entries = [Entry(e["backend"], trial(e["job"]), e["tuned"], e["note"], job=e["job"],

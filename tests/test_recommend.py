@@ -166,3 +166,42 @@ def test_traits_of_spheres_see_clumping_along_z():
     traits = measure_traits(simulate(along_z, 2))
     assert traits.concentration_z < recommend_traits.CONCENTRATED < traits.concentration_x
     assert "clumped along z" in traits.words()
+
+
+def test_the_verdict_says_whether_the_pairs_or_the_queries_decided():
+    traits = measure_traits(simulate(generate("uniform", 100, seed=1), 2))
+    asked = "1000 rays across the world"
+    sweep = Entry("own.sap", Trial("own.sap", {}, "ok", 30.0, 29.0, 31.0, queries_ms=29.7))  # pairs alone 0.3 ms
+    grid = Entry("own.grid", Trial("own.grid", {}, "ok", 1.4, 1.3, 1.5, queries_ms=1.0))  # pairs alone 0.4 ms
+    text = "\n".join(verdict(rank([sweep, grid]), [sweep, grid], traits, asked))
+    assert "Use own.grid" in text
+    assert ("The queries decided: own.sap is the fastest for the pairs alone (0.3 ms against 0.4), but 1000 rays "
+            "across the world take it 29.7 ms a frame against 1 for own.grid.") in text
+    tree = Entry("own.bvh", Trial("own.bvh", {}, "ok", 2.0, 1.9, 2.1, queries_ms=1.7))  # pairs alone 0.3 ms
+    text = "\n".join(verdict(rank([tree, sweep]), [tree, sweep], traits, asked))
+    assert "The pairs decided: own.bvh is also the fastest for the pairs alone (0.3 ms); 1000 rays" in text
+    assert "decided" not in "\n".join(verdict(rank([entry("a", 1.0, 0.9, 1.1)]), [entry("a", 1.0, 0.9, 1.1)], traits))
+
+
+def test_rays_a_frame_are_timed_with_the_pairs_and_only_backends_that_answer_them_are_tried(tmp_path, capsys):
+    out = tmp_path / "rec"
+    assert recommend.main(["--n", "400", "--backends", "own.grid,own.sap,scipy.kdtree", "--no-tune", "--frames", "2",
+                           "--repeat", "2", "--rays", "200", "--box-queries", "50", "--box-size", "small",
+                           "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "not tried, they answer no boxes or rays queries: scipy.*" in printed
+    assert "Each frame asks 200 rays across the world and 50 box queries of 1 diameter after its pairs" in printed
+    assert "decided: " in printed
+    rows = pd.read_csv(out / "results.csv")
+    ok = rows[rows.status == "ok"]
+    assert set(ok.backend) == {"own.grid", "own.sap"} and (ok.t_queries_s > 0).all()
+    assert (ok.t_total_s >= ok.t_update_s + ok.t_pairs_s + ok.t_queries_s).all()  # the queries are in the frame
+    checked = ok.dropna(subset=["rays_across_missed"])
+    assert len(checked) and (checked.rays_across_missed == 0).all() and (checked.boxes_small_missed == 0).all()
+    assert recommend.main(["--report-only", "--out", str(out)]) == 0
+    assert "decided: " in capsys.readouterr().out  # the query sets are read back from meta.json
+
+
+def test_a_negative_count_of_queries_is_a_one_line_error(tmp_path, capsys):
+    assert run_cli("recommend", recommend.main, ["--rays", "-3", "--out", str(tmp_path / "o")]) == 2
+    assert "--rays must be a count >= 0, got -3" in capsys.readouterr().err

@@ -27,9 +27,12 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from interface.base import size_keyword
+from interface.registry import create
+
 from .common import PairCollector, cell_of
-from .query_reference import (boxes_meeting, clip_to_slab, closest_hits, every_ray_hit, points_inside, query_meets,
-                              ray_hit)
+from .query_reference import (boxes_meeting, clip_to_slab, closer_hits, closest_hits, every_ray_hit, points_inside,
+                              query_meets, ray_hit)
 from .tree_query import NODE_MARGIN
 
 NO_LINKS = np.empty(0, dtype=np.int64)  # the lists' arrays of a grid whose cells are slot ranges
@@ -202,22 +205,45 @@ NO_ROWS, NO_LENGTHS = np.empty((0, 2), dtype=np.int64), np.empty(0)
 _REFERENCE = (every_ray_hit, boxes_meeting, points_inside)  # by kind, where no cells are built
 
 
+# From this many large objects a query batch files them in a grid of their own (cells sized by
+# them, its own large bucket filed again), instead of testing every one against every query: on
+# radii spread 1 to 80 (n = 16384, 2995 large), 1000 rays across the world took 310 ms in the
+# large bucket's scan against 5 ms down own.bvh. Below it, the scan costs less than filing them.
+LARGE_LEVEL_FROM = 64
+
+
 class CellQueries:
     """Mixin of the query hooks of a backend over a grid's cells (BroadPhase's rows): it names what
     to query in `_query_cells()`: (the positions and sizes of its rows, now; its GridCells, or None
-    where it has no cells (a small scene): then every row is tested, as the reference does)."""
+    where it has no cells (a small scene): then every row is tested, as the reference does). The
+    large objects, where many, go to a grid of their own for each batch of queries (an O(large)
+    counting sort, where the scan cost O(large) a query)."""
 
     answers = ("rays", "boxes", "points")
 
     def _query_cells(self) -> tuple[np.ndarray, np.ndarray, GridCells | None]:
         raise NotImplementedError
 
-    def _closest_hits(self, origins, directions, lengths):
+    def _levels(self):
+        """(positions, sizes, this grid's cells, (large ids, their grid) or None), or cells None."""
         positions, sizes, cells = self._query_cells()
+        if cells is None or len(cells.large) < LARGE_LEVEL_FROM:
+            return positions, sizes, cells, None
+        large = cells.large
+        level = create("own.grid", vector=False)
+        level.reset(positions[large], **size_keyword(sizes[large]))
+        return positions, sizes, cells._replace(large=NO_LINKS), (large, level)
+
+    def _closest_hits(self, origins, directions, lengths):
+        positions, sizes, cells, level = self._levels()
         if cells is None:
             return closest_hits(origins, directions, lengths, positions, sizes)
         hit, at = np.full(len(origins), -1, dtype=np.int64), np.full(len(origins), np.inf)
         grid_met(0, origins, directions, lengths, positions, sizes, *cells, hit, at, NO_ROWS)
+        if level is not None:
+            large, grid = level
+            row, t = grid._closest_hits(origins, directions, lengths)
+            hit, at = closer_hits(hit, at, np.where(row >= 0, large[np.maximum(row, 0)], -1), t)
         return hit, at
 
     def _every_hit(self, origins, directions, lengths):
@@ -230,11 +256,19 @@ class CellQueries:
         return self._met_in_cells(2, points, points, NO_LENGTHS)
 
     def _met_in_cells(self, kind, a0, a1, a2):
-        positions, sizes, cells = self._query_cells()
+        positions, sizes, cells, level = self._levels()
         if cells is None:
             return _REFERENCE[kind](*(a0, a1, a2)[:3 - kind], positions, sizes)
         collect = self.__dict__.get("_cells_collect")
         if collect is None:
             collect = self._cells_collect = PairCollector()
         no_hit, no_t = np.empty(0, dtype=np.int64), np.empty(0)
-        return collect(grid_met, kind, a0, a1, a2, positions, sizes, *cells, no_hit, no_t)[0]
+        found = collect(grid_met, kind, a0, a1, a2, positions, sizes, *cells, no_hit, no_t)[0]
+        if level is None:
+            return found
+        large, grid = level
+        met = getattr(grid, _HOOKS[kind])(*(a0, a1, a2)[:3 - kind])
+        return np.concatenate([found, np.column_stack([met[:, 0], large[met[:, 1]]])])
+
+
+_HOOKS = ("_every_hit", "_boxes_met", "_points_met")

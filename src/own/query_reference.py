@@ -172,3 +172,10 @@ def boxes_meeting(lo, hi, positions, sizes) -> np.ndarray:
 def points_inside(points, positions, sizes) -> np.ndarray:
     """Every (query, object) whose shape holds the point, (m, 2), sorted."""
     return _all_meeting(2, points, points, np.empty(0), positions, sizes)
+
+
+def closer_hits(hit: np.ndarray, at: np.ndarray, other: np.ndarray, other_at: np.ndarray):
+    """Two answers' closest hits merged (object ids, -1 and inf for none): the closer of each ray's,
+    of equal t the lower id, as the reference's rule."""
+    nearer = (other_at < at) | ((other_at == at) & (other >= 0) & ((hit < 0) | (other < hit)))
+    return np.where(nearer, other, hit), np.where(nearer, other_at, at)

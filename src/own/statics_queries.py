@@ -14,6 +14,8 @@ import numpy as np
 from interface.base import size_keyword
 from interface.registry import create
 
+from .query_reference import closer_hits
+
 
 class StaticsQueried:
     """Mixin, before the structure in the bases, of a backend of ours that holds its statics apart."""
@@ -46,10 +48,7 @@ class StaticsQueried:
             return hit, t
         ids, answerer = statics
         row, at = answerer.raycast(origins, directions, lengths)
-        static_hit = np.where(row >= 0, ids[np.maximum(row, 0)], -1)
-        # The static where it is closer, or as close with the lower id (a miss is at inf, id -1).
-        nearer = (at < t) | ((at == t) & (static_hit >= 0) & ((hit < 0) | (static_hit < hit)))
-        return np.where(nearer, static_hit, hit), np.where(nearer, at, t)
+        return closer_hits(hit, t, np.where(row >= 0, ids[np.maximum(row, 0)], -1), at)
 
     def raycast_all(self, origins, directions, lengths):
         return self._with_statics(super().raycast_all(origins, directions, lengths), "raycast_all",

@@ -23,6 +23,8 @@ import numpy as np
 from interface.queries import check_rays
 from own.query_reference import boxes_meeting, closest_hits, points_inside
 
+from .results import QUERY_COUNTS
+
 # A closest hit counts as right where its distance is the reference's within this share of the ray's
 # length (an engine in float32 finds the same hit a few ulps away; of two shapes hit at that
 # distance, either is right).
@@ -31,20 +33,22 @@ SAME_HIT_SHARE = 1e-5
 
 @dataclass(frozen=True)
 class QuerySet:
-    """Q queries of one kind ("rays", "boxes", "points") at one size (`span` in mean diameters, or
-    `world`: a share of the world's diagonal)."""
+    """`count` queries a frame of one kind ("rays", "boxes", "points") at one size (`span` in mean
+    diameters, or `world`: a share of the world's diagonal)."""
 
     label: str
     kind: str
     span: float = 0.0
     world: float = 0.0
+    count: int = 1000
 
     def length(self, diameter: float, diagonal: float) -> float:
         return self.span * diameter + self.world * diagonal
 
 
 def query_sets() -> tuple[QuerySet, ...]:
-    """The sets the study asks (issue: rays at three lengths, boxes at three sizes, points)."""
+    """The sets the study asks, 1000 of each a frame (as Box2D v3's `queries` scene and Bullet's
+    benchmark ask): rays at three lengths, boxes at three sizes, points."""
     return (QuerySet("rays_short", "rays", span=4.0), QuerySet("rays_quarter", "rays", world=0.25),
             QuerySet("rays_across", "rays", world=1.0), QuerySet("boxes_small", "boxes", span=1.0),
             QuerySet("boxes_medium", "boxes", span=4.0), QuerySet("boxes_large", "boxes", span=16.0),
@@ -53,15 +57,23 @@ def query_sets() -> tuple[QuerySet, ...]:
 
 QUERY_SETS = query_sets()
 # The columns each set adds to a frame's row.
-QUERY_FIELDS = ("t_{}_s", "{}_found", "{}_missed", "{}_wrong", "{}_extra")
+QUERY_FIELDS = ("t_{}_s", *("{}" + count for count in QUERY_COUNTS))
 
 
 def query_columns(sets: tuple[QuerySet, ...] = QUERY_SETS) -> list[str]:
+    """The columns of a study's rows that the sets add (`t_queries_s`, their time together, is in
+    every study's columns)."""
     return [f.format(s.label) for s in sets for f in QUERY_FIELDS]
 
 
+def query_errors(row: dict[str, Any], sets: tuple[QuerySet, ...]) -> int:
+    """A row's missed hits and wrong closest hits over the sets (empty where not verified)."""
+    return sum(int(row[f"{s.label}_{k}"]) for s in sets for k in ("missed", "wrong")
+               if row.get(f"{s.label}_{k}") is not None and row[f"{s.label}_{k}"] == row[f"{s.label}_{k}"])
+
+
 def frame_queries(qs: QuerySet, count: int, positions: np.ndarray, sizes: np.ndarray, frame: int) -> tuple:
-    """The set's `count` queries for this frame: (origins, directions, lengths) of rays, (lo, hi) of
+    """`count` of the set's queries for this frame: (origins, directions, lengths) of rays, (lo, hi) of
     boxes, (points,) of points; the same for every backend."""
     d = positions.shape[1]
     rng = np.random.default_rng([zlib.crc32(qs.label.encode()), frame])
@@ -112,12 +124,13 @@ def compare(qs: QuerySet, got, want, lengths: np.ndarray | None) -> dict[str, in
     return {"found": len(got), "missed": int(len(want) - found), "wrong": 0, "extra": int(len(got) - found)}
 
 
-def frame_query_columns(backend, sets: tuple[QuerySet, ...], count: int, positions: np.ndarray, sizes: np.ndarray,
-                        alive: np.ndarray | None, frame: int, verified: bool,
-                        budget_s: float = np.inf) -> dict[str, Any]:
+def frame_query_columns(backend, sets: tuple[QuerySet, ...], positions: np.ndarray, sizes: np.ndarray,
+                        alive: np.ndarray | None, frame: int, verified: bool, budget_s: float = np.inf,
+                        most: int | None = None) -> dict[str, Any]:
     """One frame's query columns: each set's time, and on a verified frame its counts against the
-    reference (empty on another). A kind the backend does not answer leaves its set's columns empty;
-    once the sets asked took over `budget_s`, the rest are not asked (empty)."""
+    reference (empty on another); `t_queries_s`, the sets' time together. A kind the backend does
+    not answer leaves its set's columns empty; once the sets asked took over `budget_s`, the rest
+    are not asked (empty). `most`: at most this many queries of each set (a warm-up's few)."""
     columns: dict[str, Any] = {}
     spent = 0.0
     live = positions if alive is None else positions[alive]
@@ -125,7 +138,7 @@ def frame_query_columns(backend, sets: tuple[QuerySet, ...], count: int, positio
     for qs in sets:
         if qs.kind not in backend.answers or not len(live) or spent > budget_s:
             continue
-        queries = frame_queries(qs, count, live, live_sizes, frame)
+        queries = frame_queries(qs, qs.count if most is None else min(qs.count, most), live, live_sizes, frame)
         start = time.perf_counter()
         got = ask(backend, qs, queries)
         columns[f"t_{qs.label}_s"] = took = time.perf_counter() - start
@@ -134,4 +147,5 @@ def frame_query_columns(backend, sets: tuple[QuerySet, ...], count: int, positio
             want = reference(qs, queries, positions, sizes, alive)
             counts = compare(qs, got, want, queries[2] if qs.kind == "rays" else None)
             columns.update({f"{qs.label}_{k}": v for k, v in counts.items()})
+    columns["t_queries_s"] = spent
     return columns

@@ -32,11 +32,12 @@ COLUMNS = [
     "backend", "params", "experiment", "label", "scene", "dist", "n", "dim", "radius_min", "radius_max", "speed", "seed",
     "repeat", "frame", "t_update_s", "t_pairs_s", "t_narrow_s", "t_total_s", "t_engine_broadphase_s", "candidates",
     "true_pairs", "missed", "false_positives", "box_pairs", "box_missed", "reports", "t_setup_s", "status", "stats",
-    "tunneled", "peak_rss_mb", "host", "cpu", "job", "t_compile_s", "shape",
+    "tunneled", "peak_rss_mb", "host", "cpu", "job", "t_compile_s", "shape", "t_queries_s",
 ]
 # Columns added since the first version, with the value every earlier row means (dim: circles;
-# compilation: not measured apart, so inside the setup; shape: circles and spheres).
-ADDED_COLUMNS = {"dim": 2, "t_compile_s": None, "shape": "balls"}
+# compilation: not measured apart, so inside the setup; shape: circles and spheres; queries: none
+# asked). A frame's queries (studies/lib/query_runs.py) are part of its total.
+ADDED_COLUMNS = {"dim": 2, "t_compile_s": None, "shape": "balls", "t_queries_s": None}
 STAGES = ["update", "pairs", "narrow", "total"]
 WORKER_DIED = "failed: the worker running it died"  # the status of a job no worker lived through
 PARTIAL, FINAL = "results.partial.csv", "results.csv"
@@ -209,13 +210,14 @@ def left_out_note(rows: pd.DataFrame) -> str:
                      if key in backends)
 
 
-def stored_runs(folder: Path) -> dict[str, list[dict[str, Any]]]:
-    """The finished runs of a study's folder by job key, read-only (for --report-only)."""
+def stored_runs(folder: Path, columns: list[str] = COLUMNS) -> dict[str, list[dict[str, Any]]]:
+    """The finished runs of a study's folder by job key, read-only (for --report-only); `columns`:
+    those its rows were written with."""
     folder = Path(folder)
     source = folder / FINAL if (folder / FINAL).exists() else folder / PARTIAL
     if not source.exists():
         raise CliError(f"{folder} holds no {FINAL} or {PARTIAL} to report on")
-    by_job, unfinished, _ = load_runs(source)
+    by_job, unfinished, _ = load_runs(source, columns)
     return {k: [typed(r) for r in rs] for k, rs in by_job.items() if k not in unfinished}
 
 
@@ -241,6 +243,7 @@ def _int(text: Any) -> int:
 INTEGERS = {"n", "seed", "repeat", "frame", "candidates", "true_pairs", "missed", "false_positives", "box_pairs",
             "box_missed", "tunneled"}
 FLOATS = {"radius_min", "radius_max", "speed", "peak_rss_mb"} | {c for c in COLUMNS if c.startswith("t_")}
+QUERY_COUNTS = ("_found", "_missed", "_wrong", "_extra")  # a query set's counts (studies/lib/query_runs.py)
 
 
 def typed(row: dict[str, str]) -> dict[str, Any]:
@@ -249,9 +252,9 @@ def typed(row: dict[str, str]) -> dict[str, Any]:
     for key, value in row.items():
         if value == "":
             out[key] = None
-        elif key in INTEGERS:
+        elif key in INTEGERS or key.endswith(QUERY_COUNTS):
             out[key] = int(float(value))
-        elif key in FLOATS:
+        elif key in FLOATS or (key.startswith("t_") and key.endswith("_s")):  # a query set's time too
             out[key] = float(value)
         else:
             out[key] = value

@@ -22,6 +22,7 @@ from scenes import Scene
 
 from . import compiling
 from .harness import Job, Outcome
+from .query_runs import query_errors
 from .results import missed_total, summarise
 from .runner import Runner
 
@@ -43,6 +44,7 @@ class Trial:
     contacts: int = 0  # truly overlapping pairs over the checked frames
     contacts_missed: int = 0  # of those, absent from the candidates
     key: str = ""  # the key of the job behind it, in the results
+    queries_ms: float = 0.0  # of a frame, the queries asked after its pairs (a job's `queries`), as median_ms
 
     @property
     def error(self) -> float:
@@ -80,6 +82,11 @@ class Trial:
         trial.missed = int(missed_total(line.to_frame().T).iloc[0])
         trial.described, trial.last_stats = line.params, ok[-1]["stats"]
         trial.contacts, trial.contacts_missed = int(line.contacts), int(line.missed)
+        if job.queries:  # its missed and wrong answers count as missed pairs do: never recommended
+            # The same statistic as the frame's: the median over repeats of a repeat's mean.
+            asked = pd.DataFrame({"repeat": [r["repeat"] for r in ok], "s": [r.get("t_queries_s") or 0.0 for r in ok]})
+            trial.queries_ms = float(asked.groupby("repeat").s.mean().median()) * 1e3
+            trial.missed += sum(query_errors(r, job.queries) for r in ok)
         return trial
 
 
