@@ -95,6 +95,8 @@ def main(argv: list[str] | None = None) -> int:
     dim = dim_of(args)
     chosen = in_dimension(matched_backends(args.backends), dim)
     command = command_line("queries", argv)
+    # Every command that measured rows here: a resumed run may add families, sizes or backends.
+    commands = (read_meta(Path(args.out)).get("commands", []) if args.resume else []) + [command]
     with Output(args.out, "queries", command, args.resume) as out:
         unavailable = warn_unavailable(chosen)
         runnable = answering([b for b in chosen if b not in unavailable])
@@ -106,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
                 and len(args.query_sets) == len(QUERY_SETS))
         out.meta(full=full, families=args.family_list, sizes=args.size_list, frames=args.frames, repeats=args.repeat,
                  dim=dim, queries=args.queries, sets=[s.label for s in args.query_sets], unavailable=unavailable,
-                 commands=[command])
+                 commands=commands)
         jobs = []
         boxes = [f for f in args.family_list if family_shape(f) == "boxes"]
         box_runnable = in_dimension(runnable, dim, "boxes") if boxes else []

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 import engines
 from interface.queries import check_rays
 from own.query_reference import boxes_meeting, closest_hits, every_ray_hit, points_inside
+from studies.lib.query_runs import SAME_HIT_SHARE
 
 ANSWERING = [n for n in engines.available() if engines.backend_class(n).answers]
 
@@ -137,6 +138,28 @@ def test_the_reference_rays_agree_with_independent_geometry(dim, data):
             assert nearer[0][0] == k  # cut at t, the ray still hits k first
 
 
+def assert_closest_hits(cls, hit, t, want_hit, want_t, lengths):
+    """Ours: the reference's bit for bit. An engine's (its own arithmetic, float32 or the circle
+    taken from its box): a hit wherever the reference has one, at the reference's distance within
+    SAME_HIT_SHARE of the ray's length, on the same object or one as close."""
+    if cls.exact:
+        assert np.array_equal(hit, want_hit) and np.array_equal(t, want_t)
+        return
+    assert np.array_equal(hit >= 0, want_hit >= 0), "an engine missed a hit, or hit nothing there"
+    hits = want_hit >= 0
+    assert np.all(np.abs(t[hits] - want_t[hits]) <= SAME_HIT_SHARE * np.maximum(lengths[hits], 1.0))
+
+
+def assert_met(cls, got, want):
+    """Ours: the reference's (query, object) rows. An engine's: every one of them, and maybe more
+    (its fat boxes or its cells: candidates, as its pairs are)."""
+    if cls.exact:
+        assert got.tolist() == want.tolist()
+        return
+    missed = set(map(tuple, want.tolist())) - set(map(tuple, got.tolist()))
+    assert not missed, f"{cls.name} missed {len(missed)} answers, e.g. {sorted(missed)[:3]}"
+
+
 def random_scene(rng, n, dim, boxes):
     positions = rng.uniform(0, 100, (n, dim))
     sizes = rng.uniform(0.5, 6, (n, dim)) if boxes else rng.uniform(0.5, 6, n)
@@ -167,19 +190,18 @@ def test_a_backend_answers_every_query_as_the_reference_with_statics_and_spawnin
         o, u, _ = check_rays(origins, directions, lengths, dim)
         hit, t = closest_hits(o, u, lengths, positions[ids], sizes[ids])
         got_hit, got_t = backend.raycast(origins, directions, lengths)
-        assert np.array_equal(got_hit, np.where(hit >= 0, ids[np.maximum(hit, 0)], -1))
-        assert np.array_equal(got_t, t)
+        assert_closest_hits(cls, got_hit, got_t, np.where(hit >= 0, ids[np.maximum(hit, 0)], -1), t, lengths)
         for got, want in ((backend.raycast_all(origins, directions, lengths),
                            every_ray_hit(o, u, lengths, positions[ids], sizes[ids])),
                           (backend.query_boxes(lo, hi), boxes_meeting(lo, hi, positions[ids], sizes[ids])),
                           (backend.query_points(points), points_inside(points, positions[ids], sizes[ids]))):
-            assert got.tolist() == np.column_stack([want[:, 0], ids[want[:, 1]]]).tolist()
+            assert_met(cls, got, np.column_stack([want[:, 0], ids[want[:, 1]]]))
         moved = positions + np.where(static[:, None], 0.0, rng.normal(0, 2, (n, dim)))
         positions, alive = moved, alive ^ (rng.random(n) < 0.05)
         backend.update(positions, alive)
 
 
-STRUCTURES = [n for n in ANSWERING if n != "own.brute"]
+STRUCTURES = [n for n in ANSWERING if engines.of_kind(n, "own") and n != "own.brute"]
 
 
 def assert_answers_as_the_reference(backend, positions, sizes, origins, directions, lengths, lo, hi, points):

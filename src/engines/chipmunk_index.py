@@ -41,8 +41,10 @@ typedef double cpFloat;
 typedef uintptr_t cpHashValue;
 typedef uint32_t cpCollisionID;
 typedef struct cpBB { cpFloat l, b, r, t; } cpBB;
+typedef struct cpVect { cpFloat x, y; } cpVect;
 typedef cpBB (*cpSpatialIndexBBFunc)(void *obj);
 typedef cpCollisionID (*cpSpatialIndexQueryFunc)(void *obj1, void *obj2, cpCollisionID id, void *data);
+typedef cpFloat (*cpSpatialIndexSegmentQueryFunc)(void *obj1, void *obj2, void *data);
 typedef struct cpSpatialIndexClass cpSpatialIndexClass;
 typedef struct cpSpatialIndex {
     cpSpatialIndexClass *klass;
@@ -59,8 +61,9 @@ struct cpSpatialIndexClass {
     void (*reindex)(cpSpatialIndex *index);
     void (*reindexObject)(cpSpatialIndex *index, void *obj, cpHashValue hashid);
     void (*reindexQuery)(cpSpatialIndex *index, cpSpatialIndexQueryFunc func, void *data);
-    void *query;
-    void *segmentQuery;
+    void (*query)(cpSpatialIndex *index, void *obj, cpBB bb, cpSpatialIndexQueryFunc func, void *data);
+    void (*segmentQuery)(cpSpatialIndex *index, void *obj, cpVect a, cpVect b, cpFloat t_exit,
+                         cpSpatialIndexSegmentQueryFunc func, void *data);
 };
 cpSpatialIndex *cpSweep1DNew(cpSpatialIndexBBFunc bbfunc, cpSpatialIndex *staticIndex);
 cpSpatialIndex *cpBBTreeNew(cpSpatialIndexBBFunc bbfunc, cpSpatialIndex *staticIndex);
@@ -72,7 +75,7 @@ ffi = cffi.FFI()
 ffi.cdef(CDEF)
 lib = ffi.dlopen(str(Path(pymunk._chipmunk.__file__)))
 
-RECORD = 6  # doubles per object: l, b, r, t, vx, vy
+RECORD = 7  # doubles per object: l, b, r, t, vx, vy, and its index (read by a ray's callback)
 RECORD_BYTES = RECORD * 8
 HEADER = 3  # the pair buffer starts with: count, capacity, address of record 0
 FRAME_DT = 1.0 / 60.0  # the tree's velocity term assumes the study's frame rate, as a Space's bodies would
@@ -104,15 +107,83 @@ def _collect(a, b, pair_id, data):
     return pair_id
 
 
+# Queries (interface/queries.py) go to the index's own `query` (a box) and `segmentQuery` (a ray),
+# as a Space's cpSpaceBBQuery and cpSpaceSegmentQuery do, to the dynamic index and to the static
+# one; the index hands each object whose box it meets to a callback. A box or point query's answer
+# is what the index hands over (its fat boxes, its cells, or Sweep1D's x intervals: candidates, as
+# its pairs are). A ray's callback tests the object's shape, as a Space's cpShapeSegmentQuery does,
+# and returns the hit's fraction of the segment, with which the index clips the ray (the closest
+# hit), or 1 (every hit). Its buffer of doubles: the ray (ox, oy, ux, uy, length, segment length),
+# record 0's address, the shape (0 balls, 1 boxes), the mode (0 closest, 1 every hit), the best
+# hit's t and record, then for every hit its count, capacity and the records hit.
+RAY_HEADER = 13
+QUERY_HEADER = 4  # a box query's buffer: count, capacity, record 0's address, the query's row
+
+
+@nb.cfunc(types.float64(types.voidptr, types.CPointer(types.float64), types.CPointer(types.float64)), cache=True)
+def _ray_callback(query, record, data):
+    """The ray in `data` against the object of `record`: its circle (centred in its box) or its box,
+    closed, from the origin (0 where it starts inside) to its length; the hit's fraction of the
+    segment handed to the index (the best so far where it misses, for a closest hit; 1 for every hit)."""
+    ox, oy, ux, uy, length, segment = data[0], data[1], data[2], data[3], data[4], data[5]
+    left, bottom, right, top = record[0], record[1], record[2], record[3]
+    hit = np.inf
+    if data[7] == 0.0:  # a circle: |o + s u - c| = radius
+        cx, cy, radius = 0.5 * (left + right), 0.5 * (bottom + top), 0.5 * (right - left)
+        px, py = ox - cx, oy - cy
+        bb, cc = px * ux + py * uy, px * px + py * py - radius * radius
+        disc = bb * bb - cc
+        if cc <= 0.0:
+            hit = 0.0
+        elif bb <= 0.0 and disc >= 0.0:
+            hit = max(-bb - np.sqrt(disc), 0.0)
+    else:  # a box: the slabs
+        t0, t1 = 0.0, length
+        for lo, hi, o, u in ((left, right, ox, ux), (bottom, top, oy, uy)):
+            if u == 0.0:
+                if o < lo or o > hi:
+                    t0 = np.inf
+            else:
+                s0, s1 = (lo - o) / u, (hi - o) / u
+                t0, t1 = max(t0, min(s0, s1)), min(t1, max(s0, s1))
+        hit = t0 if t0 <= t1 else np.inf
+    if hit > length:
+        return data[9] / segment if data[8] == 0.0 else 1.0
+    k = record[6]
+    if data[8] == 0.0:  # the closest hit: of equal t, the lower index
+        if hit < data[9] or (hit == data[9] and k < data[10]):
+            data[9], data[10] = hit, k
+        return data[9] / segment
+    count = int(data[11])
+    if count < data[12]:
+        data[RAY_HEADER + count] = k
+    data[11] = count + 1
+    return 1.0
+
+
+@nb.cfunc(types.uint32(types.intp, types.intp, types.uint32, types.CPointer(types.int64)), cache=True)
+def _collect_met(query, obj, pair_id, data):
+    """Store (the query's row, the object's index) while there is room; count it either way."""
+    count = data[0]
+    if count < data[1]:
+        data[QUERY_HEADER + 2 * count] = data[3]
+        data[QUERY_HEADER + 2 * count + 1] = (obj - data[2]) // RECORD_BYTES
+    data[0] = count + 1
+    return pair_id
+
+
 BOX_OF = ffi.cast("cpSpatialIndexBBFunc", _box_of.address)
 VELOCITY_OF = ffi.cast("void *", _velocity_of.address)
 COLLECT = ffi.cast("cpSpatialIndexQueryFunc", _collect.address)
+RAY_CALLBACK = ffi.cast("cpSpatialIndexSegmentQueryFunc", _ray_callback.address)
+COLLECT_MET = ffi.cast("cpSpatialIndexQueryFunc", _collect_met.address)
 
 
 class _ChipmunkIndex(BroadPhase):
     exact = False
     reports = "boxes"
     lifecycle = "native"
+    answers = ("rays", "boxes", "points")  # the index's own query and segmentQuery (see RAY_HEADER)
 
     def _new_index(self, positions: np.ndarray, radii: np.ndarray, static_index):
         raise NotImplementedError
@@ -124,6 +195,10 @@ class _ChipmunkIndex(BroadPhase):
     def _reset(self, positions, radii):
         self.close()
         self._records = np.zeros((self.n, RECORD))
+        self._records[:, 6] = np.arange(self.n)
+        self._indexed = False  # whether the index holds this frame's boxes (its pairs were asked)
+        # The queries' buffers (see RAY_HEADER), kept from call to call, grown when a query overflows.
+        self._ray_data, self._met_buffer = np.zeros(RAY_HEADER + 256), np.zeros(QUERY_HEADER + 8192, dtype=np.int64)
         self._previous = positions.copy()
         self._write_boxes(positions)
         self._is_static = self.static if self.static is not None else np.zeros(self.n, dtype=bool)
@@ -162,6 +237,7 @@ class _ChipmunkIndex(BroadPhase):
         self._update(positions)
 
     def _update(self, positions):
+        self._indexed = False
         self._write_boxes(positions)
         self._records[:, 4:6] = (positions - self._previous) / FRAME_DT
         self._previous = positions.copy()
@@ -179,6 +255,7 @@ class _ChipmunkIndex(BroadPhase):
             start = time.perf_counter()
             self._index.klass.reindexQuery(self._index, COLLECT, ffi.cast("void *", buffer.ctypes.data))
             self._engine_s = time.perf_counter() - start
+            self._indexed = True
             count = int(buffer[0])
             if count <= buffer[1]:
                 break
@@ -190,6 +267,79 @@ class _ChipmunkIndex(BroadPhase):
 
     def engine_broadphase_s(self) -> float | None:
         return self._engine_s
+
+    def _current_indexes(self) -> list:
+        """The dynamic index and the static one, holding this frame's boxes: a query after an
+        update whose pairs were not asked reindexes through the pairs (as a Space's step would)."""
+        if not self._indexed:
+            self._pairs()
+        return [index for index in (self._index, self._static_index) if index is not None]
+
+    def _closest_hits(self, origins, directions, lengths):
+        return self._rays(origins, directions, lengths, every=False)
+
+    def _every_hit(self, origins, directions, lengths):
+        return self._rays(origins, directions, lengths, every=True)
+
+    def _rays(self, origins, directions, lengths, every: bool):
+        indexes = self._current_indexes()
+        m = len(origins)
+        hit, at, found = np.full(m, -1, dtype=np.int64), np.full(m, np.inf), []
+        data = self._ray_data
+        data[7], data[8] = float(self.shape == "boxes"), float(every)
+        pointer = ffi.cast("void *", data.ctypes.data)
+        a, b = ffi.new("cpVect *"), ffi.new("cpVect *")
+        for q in range(m):
+            o, u, length = origins[q], directions[q], float(lengths[q])
+            # A segment of zero length has no direction for the index's slab tests (0 * inf): it
+            # gets a length of rounding, and the callback still stops at the ray's own.
+            segment = max(length, 1e-12 * (1.0 + abs(o[0]) + abs(o[1])))
+            a.x, a.y, b.x, b.y = o[0], o[1], o[0] + segment * u[0], o[1] + segment * u[1]
+            while True:
+                data[0:6] = o[0], o[1], u[0], u[1], length, segment
+                data[9], data[10], data[11], data[12] = np.inf, -1.0, 0.0, len(data) - RAY_HEADER
+                for index in indexes:
+                    exit_at = 1.0 if every or not data[9] < np.inf else min(1.0, data[9] / segment)
+                    index.klass.segmentQuery(index, ffi.NULL, a[0], b[0], exit_at, RAY_CALLBACK, pointer)
+                if data[11] <= data[12]:
+                    break
+                data = self._ray_data = np.zeros(RAY_HEADER + 2 * int(data[11]))  # every hit of this ray: again
+                data[7], data[8] = float(self.shape == "boxes"), float(every)
+                pointer = ffi.cast("void *", data.ctypes.data)
+            if every:
+                ids = data[RAY_HEADER:RAY_HEADER + int(data[11])].astype(np.int64)
+                found.append(np.column_stack([np.full(len(ids), q), ids]))
+            elif data[10] >= 0:
+                hit[q], at[q] = int(data[10]), data[9]
+        if every:
+            return np.concatenate(found) if found else np.empty((0, 2), dtype=np.int64)
+        return hit, at
+
+    def _boxes_met(self, lo, hi):
+        return self._met_by_boxes(lo, hi)
+
+    def _points_met(self, points):
+        return self._met_by_boxes(points, points)
+
+    def _met_by_boxes(self, lo, hi):
+        """What the index hands over for each query box: the objects whose boxes (fat, in the tree;
+        sharing a cell, in the hash; overlapping along x, in Sweep1D) it meets."""
+        indexes = self._current_indexes()
+        buffer = self._met_buffer
+        bb = ffi.new("cpBB *")
+        while True:
+            buffer[0], buffer[1], buffer[2] = 0, (len(buffer) - QUERY_HEADER) // 2, self._records.ctypes.data
+            pointer = ffi.cast("void *", buffer.ctypes.data)
+            for q in range(len(lo)):
+                buffer[3] = q
+                bb.l, bb.b, bb.r, bb.t = lo[q, 0], lo[q, 1], hi[q, 0], hi[q, 1]
+                for index in indexes:
+                    index.klass.query(index, ffi.NULL, bb[0], COLLECT_MET, pointer)
+            count = int(buffer[0])
+            if count <= buffer[1]:
+                break
+            buffer = self._met_buffer = np.zeros(QUERY_HEADER + 2 * (count + count // 4), dtype=np.int64)
+        return buffer[QUERY_HEADER:QUERY_HEADER + 2 * count].reshape(-1, 2).copy()
 
     def close(self):
         for name in ("_index", "_static_index"):  # the dynamic index first: it refers to the static one
