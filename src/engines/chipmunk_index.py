@@ -282,38 +282,47 @@ class _ChipmunkIndex(BroadPhase):
         return self._rays(origins, directions, lengths, every=True)
 
     def _rays(self, origins, directions, lengths, every: bool):
-        indexes = self._current_indexes()
+        """Each ray through the indexes' segmentQuery: one cffi call an index a ray, the Python
+        around it kept to plain floats (numpy scalars and slices cost more than the call)."""
+        queries = [(index, index.klass.segmentQuery) for index in self._current_indexes()]
         m = len(origins)
-        hit, at, found = np.full(m, -1, dtype=np.int64), np.full(m, np.inf), []
-        data = self._ray_data
-        data[7], data[8] = float(self.shape == "boxes"), float(every)
-        pointer = ffi.cast("void *", data.ctypes.data)
+        hit, at, found = [-1] * m, [np.inf] * m, []
+        boxes = float(self.shape == "boxes")
+        data, cells, pointer = self._ray_buffer(boxes, every)
         a, b = ffi.new("cpVect *"), ffi.new("cpVect *")
-        for q in range(m):
-            o, u, length = origins[q], directions[q], float(lengths[q])
+        for q, ((ox, oy), (ux, uy), length) in enumerate(zip(origins.tolist(), directions.tolist(), lengths.tolist(),
+                                                             strict=True)):
             # A segment of zero length has no direction for the index's slab tests (0 * inf): it
             # gets a length of rounding, and the callback still stops at the ray's own.
-            segment = max(length, 1e-12 * (1.0 + abs(o[0]) + abs(o[1])))
-            a.x, a.y, b.x, b.y = o[0], o[1], o[0] + segment * u[0], o[1] + segment * u[1]
+            segment = max(length, 1e-12 * (1.0 + abs(ox) + abs(oy)))
+            a.x, a.y, b.x, b.y = ox, oy, ox + segment * ux, oy + segment * uy
             while True:
-                data[0:6] = o[0], o[1], u[0], u[1], length, segment
-                data[9], data[10], data[11], data[12] = np.inf, -1.0, 0.0, len(data) - RAY_HEADER
-                for index in indexes:
-                    exit_at = 1.0 if every or not data[9] < np.inf else min(1.0, data[9] / segment)
-                    index.klass.segmentQuery(index, ffi.NULL, a[0], b[0], exit_at, RAY_CALLBACK, pointer)
-                if data[11] <= data[12]:
+                cells[0], cells[1], cells[2], cells[3], cells[4], cells[5] = ox, oy, ux, uy, length, segment
+                cells[9], cells[10], cells[11], cells[12] = np.inf, -1.0, 0.0, len(data) - RAY_HEADER
+                for index, segment_query in queries:
+                    best = cells[9]
+                    segment_query(index, ffi.NULL, a[0], b[0], 1.0 if every or best == np.inf else
+                                  min(1.0, best / segment), RAY_CALLBACK, pointer)
+                if cells[11] <= cells[12]:
                     break
-                data = self._ray_data = np.zeros(RAY_HEADER + 2 * int(data[11]))  # every hit of this ray: again
-                data[7], data[8] = float(self.shape == "boxes"), float(every)
-                pointer = ffi.cast("void *", data.ctypes.data)
+                data, cells, pointer = self._ray_buffer(boxes, every, 2 * int(cells[11]))  # this ray again
             if every:
-                ids = data[RAY_HEADER:RAY_HEADER + int(data[11])].astype(np.int64)
+                ids = data[RAY_HEADER:RAY_HEADER + int(cells[11])].astype(np.int64)
                 found.append(np.column_stack([np.full(len(ids), q), ids]))
-            elif data[10] >= 0:
-                hit[q], at[q] = int(data[10]), data[9]
+            elif cells[10] >= 0:
+                hit[q], at[q] = int(cells[10]), cells[9]
         if every:
             return np.concatenate(found) if found else np.empty((0, 2), dtype=np.int64)
-        return hit, at
+        return np.array(hit, dtype=np.int64), np.array(at)
+
+    def _ray_buffer(self, boxes: float, every: bool, hits: int = 0):
+        """The rays' buffer (see RAY_HEADER), grown to room for `hits` hits of a ray, with the shape
+        and the mode written: (the array, its doubles as cffi reads and writes them, its address)."""
+        if hits + RAY_HEADER > len(self._ray_data):
+            self._ray_data = np.zeros(RAY_HEADER + hits)
+        data = self._ray_data
+        data[7], data[8] = boxes, float(every)
+        return data, ffi.cast("double *", data.ctypes.data), ffi.cast("void *", data.ctypes.data)
 
     def _boxes_met(self, lo, hi):
         return self._met_by_boxes(lo, hi)
@@ -324,17 +333,17 @@ class _ChipmunkIndex(BroadPhase):
     def _met_by_boxes(self, lo, hi):
         """What the index hands over for each query box: the objects whose boxes (fat, in the tree;
         sharing a cell, in the hash; overlapping along x, in Sweep1D) it meets."""
-        indexes = self._current_indexes()
+        queries = [(index, index.klass.query) for index in self._current_indexes()]
         buffer = self._met_buffer
         bb = ffi.new("cpBB *")
+        boxes = list(zip(lo[:, 0].tolist(), lo[:, 1].tolist(), hi[:, 0].tolist(), hi[:, 1].tolist(), strict=True))
         while True:
             buffer[0], buffer[1], buffer[2] = 0, (len(buffer) - QUERY_HEADER) // 2, self._records.ctypes.data
-            pointer = ffi.cast("void *", buffer.ctypes.data)
-            for q in range(len(lo)):
-                buffer[3] = q
-                bb.l, bb.b, bb.r, bb.t = lo[q, 0], lo[q, 1], hi[q, 0], hi[q, 1]
-                for index in indexes:
-                    index.klass.query(index, ffi.NULL, bb[0], COLLECT_MET, pointer)
+            pointer, row = ffi.cast("void *", buffer.ctypes.data), ffi.cast("int64_t *", buffer.ctypes.data)
+            for q, (bb.l, bb.b, bb.r, bb.t) in enumerate(boxes):
+                row[3] = q
+                for index, query in queries:
+                    query(index, ffi.NULL, bb[0], COLLECT_MET, pointer)
             count = int(buffer[0])
             if count <= buffer[1]:
                 break
