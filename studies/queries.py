@@ -19,7 +19,6 @@ from pathlib import Path
 import pandas as pd
 
 import engines
-from scenes.costs import size_problem
 from scenes.generate import at_essay_density
 
 from .lib.cli import (CliError, Parser, command_line, compact_names, in_dimension, matched_backends, run_cli,
@@ -32,7 +31,7 @@ from .lib.pool import Pool
 from .lib.query_runs import QUERY_SETS, query_columns
 from .lib.results import COLUMNS, RowWriter, ok_lines, read_rows, summarise
 from .lib.runner import Runner
-from .scenes import _f, family_shape, known_families, size_list
+from .scenes import _f, checked_families, checked_sizes, family_shape, known_families
 
 DEFAULT_QUERIES = 1000  # a frame's queries of each set: Box2D v3's `queries` scene and Bullet's benchmark ask as many
 VERIFIED_FRAMES = (1,)  # the frame whose pairs and answers are checked against the reference (Q x n tests a set)
@@ -59,12 +58,7 @@ def parser() -> Parser:
 
 def parse(argv: list[str] | None):
     args = parse_checked(parser(), argv)
-    known = known_families(dim_of(args))
-    args.family_list = [f.strip() for f in (args.families or ",".join(known)).split(",") if f.strip()]
-    unknown = [f for f in args.family_list if f not in known]
-    if unknown or not args.family_list:
-        raise CliError(f"--families: unknown {', '.join(unknown) or 'none given'} in {dim_of(args)}D; known: "
-                       f"{', '.join(known)}")
+    args.family_list = checked_families(args)
     if args.queries < 1:
         raise CliError(f"--queries must be at least 1, got {args.queries}")
     names = [s.strip() for s in (args.sets or ",".join(SET_NAMES)).split(",") if s.strip()]
@@ -72,11 +66,7 @@ def parse(argv: list[str] | None):
     if unknown or not names:
         raise CliError(f"--sets: unknown {', '.join(unknown) or 'none given'}; the sets are {', '.join(SET_NAMES)}")
     args.query_sets = tuple(replace(s, count=args.queries) for s in QUERY_SETS if s.label in names)
-    args.size_list = size_list(args.sizes)
-    for n in args.size_list:  # before --out is touched
-        problem = size_problem(n, args.frames + 1, dim=dim_of(args))
-        if problem:
-            raise CliError(f"--sizes: {problem}")
+    args.size_list = checked_sizes(args)
     return args
 
 

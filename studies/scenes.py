@@ -54,18 +54,30 @@ def parser() -> Parser:
 
 def parse(argv: list[str] | None):
     args = parse_checked(parser(), argv)
+    args.family_list, args.size_list = checked_families(args), checked_sizes(args)
+    return args
+
+
+def checked_families(args) -> list[str]:
+    """--families in --dim's dimension (default: every family there), or a CliError naming the unknown."""
     known = known_families(dim_of(args))
-    args.family_list = [f.strip() for f in (args.families or ",".join(known)).split(",") if f.strip()]
-    unknown = [f for f in args.family_list if f not in known]
-    if unknown or not args.family_list:
+    families = [f.strip() for f in (args.families or ",".join(known)).split(",") if f.strip()]
+    unknown = [f for f in families if f not in known]
+    if unknown or not families:
         raise CliError(f"--families: unknown {', '.join(unknown) or 'none given'} in {dim_of(args)}D; known: "
                        f"{', '.join(known)}")
-    args.size_list = size_list(args.sizes)
-    for n in args.size_list:  # before --out is touched: a finished run's rows stay as they are
+    return families
+
+
+def checked_sizes(args) -> list[int]:
+    """--sizes, each checked to fit this machine over --frames, before --out is touched (a finished
+    run's rows stay as they are)."""
+    sizes = size_list(args.sizes)
+    for n in sizes:
         problem = size_problem(n, args.frames + 1, dim=dim_of(args))
         if problem:
             raise CliError(f"--sizes: {problem}")
-    return args
+    return sizes
 
 
 def size_list(sizes: str) -> list[int]:

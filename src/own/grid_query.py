@@ -149,22 +149,25 @@ def grid_met(kind, a0, a1, a2, positions, sizes, layout, strides, base, ids, sta
                 row = base + j * strides[1] + (k * strides[2] if d == 3 else 0)
                 for ii in range(i_count):
                     i = i_first + ii * i_step
-                    if kind == 0:
+                    key = row + i
+                    first = head[key + top] if linked else start[key]
+                    if first < 0 or (not linked and first == start[key + 1]):
+                        continue  # an empty cell (most of them, at up to 8 cells an object)
+                    if kind == 0 and far < np.inf:  # only a closest hit stops early: the band's entry decides
                         ti0, ti1 = _band(ox, wx, lastx, padx, i, a0[q, 0], a1[q, 0], tj0, tj1)
                         if ti0 > ti1:
                             continue
                         if ti0 > far:
                             break
-                    key = row + i
                     if linked:
-                        b = head[key + top]
+                        b = first
                         while b >= 0:
                             tested += 1
                             best, best_t, count = _visit(kind, a0, a1, a2, q, positions, sizes, ids[b], closest, best,
                                                          best_t, buf, count)
                             b = nxt[b]
                     else:
-                        for s in range(start[key], start[key + 1]):
+                        for s in range(first, start[key + 1]):
                             tested += 1
                             best, best_t, count = _visit(kind, a0, a1, a2, q, positions, sizes, ids[s], closest, best,
                                                          best_t, buf, count)
