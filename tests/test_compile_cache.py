@@ -32,3 +32,28 @@ def test_a_second_process_compiles_nothing_and_the_cache_does_not_grow():
     assert files, "no kernel of ours was cached"
     assert compiled_in_fresh_process() == "compiled 0: []"
     assert cache_files() == files
+
+
+def test_a_changed_source_file_drops_every_cached_kernel(tmp_path, monkeypatch):
+    """numba keys a kernel's cache on its own file only; one that inlines another file's function
+    would run its old code after that file changed. The project drops its cached kernels when any
+    source changed since they were written (interface/kernel_cache.py)."""
+    from interface.kernel_cache import drop_stale_kernels
+
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    (tmp_path / "interface" / "__pycache__").mkdir(parents=True)
+    (tmp_path / "own" / "__pycache__").mkdir(parents=True)
+    inlined = tmp_path / "own" / "query_reference.py"
+    inlined.write_text("def ray_hit(): return 1\n")
+    kernel = tmp_path / "own" / "__pycache__" / "tree_query.descend-12.py311.nbi"
+
+    kernel.write_text("old machine code")
+    assert drop_stale_kernels(tmp_path) and not kernel.exists()  # written before any stamp: dropped
+    kernel.write_text("machine code")
+    assert not drop_stale_kernels(tmp_path) and kernel.exists()  # the sources it was written with
+    inlined.write_text("def ray_hit(): return 2\n")
+    assert drop_stale_kernels(tmp_path) and not kernel.exists()
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "elsewhere"))
+    kernel.write_text("machine code")
+    inlined.write_text("def ray_hit(): return 3\n")
+    assert not drop_stale_kernels(tmp_path) and kernel.exists()  # a cache elsewhere is the caller's

@@ -317,6 +317,24 @@ def test_a_grid_answers_rays_along_its_cell_lines_and_through_its_corners(name, 
     assert_answers_as_the_reference(backend, corners, radii, origins, directions, lengths, lo, lo + 10.0, lo - 5.0)
 
 
+@pytest.mark.parametrize("name", ["own.brute", *STRUCTURES])
+def test_balls_whose_squares_pass_a_double_are_still_hit(name):
+    """Distances past 1.3e154 square to infinity: the ball's test runs again in larger units (a
+    power of two), so a ray 1e200 long still hits a ball 1e200 away, where it once read a miss."""
+    far = np.array([[1e200, 0.0], [1e300, 0.0]] + [[k * 10.0, 50.0] for k in range(70)])
+    radii = np.array([1e199, 1e299] + [1.0] * 70)
+    backend = engines.create(name)
+    backend.small_scene_n = 0
+    backend.reset(far, radii)
+    origins, directions = np.array([[0.0, 0.0], [-1e308, 0.0], [0.0, 50.0]]), np.array([[1.0, 0.0]] * 3)
+    lengths = np.array([2e200, 1.7e308, 5.0])
+    hit, t = backend.raycast(origins, directions, lengths)
+    assert hit.tolist() == [0, 0, 2] and np.isclose(t[0], 9e199, rtol=1e-12) and t[2] == 0.0
+    assert np.isclose(t[1], 1e308 + 9e199, rtol=1e-12)
+    lo = np.array([[9.5e199, -1.0]])
+    assert_answers_as_the_reference(backend, far, radii, origins, directions, lengths, lo, lo + 1e199, lo)
+
+
 def test_a_backend_that_answers_no_queries_says_so_in_one_line():
     backend = engines.create("own.grid_swept")
     backend.reset(np.zeros((3, 2)), np.ones(3))

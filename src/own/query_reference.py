@@ -48,14 +48,57 @@ def _ray_ball(origins, directions, lengths, q, positions, radii, k):
         oc = origins[q, a] - positions[k, a]
         b += oc * directions[q, a]
         cc += oc * oc
-    cc -= radii[k] * radii[k]
+    rr = radii[k] * radii[k]
+    if not (cc < np.inf and rr < np.inf and b * b < np.inf):
+        return _ray_far_ball(origins, directions, lengths, q, positions, radii, k)
+    cc -= rr
     if cc <= 0.0:  # the origin inside (or on) the ball
         return 0.0
     disc = b * b - cc
-    if b > 0.0 or not disc >= 0.0:  # heading away, or passing by (or squares past a double: NaN)
+    if b > 0.0 or not disc >= 0.0:  # heading away, or passing by
         return np.inf
     t = -b - np.sqrt(disc)
     return max(t, 0.0) if t <= lengths[q] else np.inf
+
+
+@nb.njit(cache=True)
+def _ray_far_ball(origins, directions, lengths, q, positions, radii, k):
+    """_ray_ball where a square passes the largest double (distances past ~1.3e154): in half
+    coordinates (exact, and never overflowing), the ray's distance from the centre taken from its
+    perpendicular part, each square divided by the larger of it and the radius first."""
+    d = positions.shape[1]
+    oc = np.empty(d)
+    b = 0.0
+    for a in range(d):
+        oc[a] = 0.5 * origins[q, a] - 0.5 * positions[k, a]
+        b += oc[a] * directions[q, a]
+    r = 0.5 * radii[k]
+    if _within(oc, r):
+        return 0.0
+    if b > 0.0:  # heading away
+        return np.inf
+    for a in range(d):
+        oc[a] -= b * directions[q, a]  # the part across the ray
+    unit = max(np.abs(oc).max(), r)
+    across = 0.0
+    for a in range(d):
+        across += (oc[a] / unit) ** 2
+    if across > (r / unit) ** 2:  # passing by
+        return np.inf
+    t = 2.0 * max(-b - unit * np.sqrt((r / unit) ** 2 - across), 0.0)
+    return t if t <= lengths[q] else np.inf
+
+
+@nb.njit(cache=True, inline="always")
+def _within(offset, r):
+    """Whether |offset| <= r, each square divided by the larger of |offset|'s parts and r first."""
+    unit = max(np.abs(offset).max(), r)
+    if unit == 0.0:
+        return True
+    s = 0.0
+    for a in range(offset.shape[0]):
+        s += (offset[a] / unit) ** 2
+    return s <= (r / unit) ** 2
 
 
 @nb.njit(cache=True, inline="always")
@@ -106,7 +149,13 @@ def _point_in_ball(points, q, positions, radii, k):
     s = 0.0
     for a in range(positions.shape[1]):
         s += (points[q, a] - positions[k, a]) ** 2
-    return s <= radii[k] * radii[k]
+    rr = radii[k] * radii[k]
+    if s < np.inf and rr < np.inf:
+        return s <= rr
+    offset = np.empty(positions.shape[1])  # squares past a double: in half coordinates, scaled
+    for a in range(positions.shape[1]):
+        offset[a] = 0.5 * points[q, a] - 0.5 * positions[k, a]
+    return _within(offset, 0.5 * radii[k])
 
 
 @nb.njit(cache=True, inline="always")
