@@ -25,7 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .checks import check_extents, check_mask, check_positions, check_radii, first_moved, shown
-from .queries import Query, check_points, check_query_boxes, check_rays, unanswered
+from .queries import Query, by_query, check_points, check_query_boxes, check_rays, unanswered
 
 if TYPE_CHECKING:
     from .knobs import Knob
@@ -490,7 +490,7 @@ class BroadPhase(ABC):
         """(query, held row) as (query, object id), sorted."""
         if self._alive_ids is not None and len(found):
             found = np.column_stack([found[:, 0], self._alive_ids[found[:, 1]]])
-        return found[np.lexsort((found[:, 1], found[:, 0]))] if len(found) else found
+        return by_query(found, self.objects)
 
     # A backend that answers queries implements those of its kinds, on the objects it holds (rows
     # of what `_reset` was handed): (row, t) of each ray's closest hit, and (query, row) pairs.

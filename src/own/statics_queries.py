@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from interface.base import size_keyword
+from interface.queries import by_query
 from interface.registry import create
 
 from .query_reference import closer_hits
@@ -68,4 +69,4 @@ class StaticsQueried:
         ids, answerer = statics
         met = getattr(answerer, query)(*args)
         found = np.concatenate([found, np.column_stack([met[:, 0], ids[met[:, 1]]])])
-        return found[np.lexsort((found[:, 1], found[:, 0]))]
+        return by_query(found, self.objects)
