@@ -487,8 +487,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 # The sets --rays and --box-queries pick from (studies/lib/query_runs.py), and how the verdict names them.
-RAY_SETS = {"short": QUERY_SETS[0], "quarter": QUERY_SETS[1], "across": QUERY_SETS[2]}
-BOX_SETS = {"small": QUERY_SETS[3], "medium": QUERY_SETS[4], "large": QUERY_SETS[5]}
+RAY_SETS = {s.label.split("_", 1)[1]: s for s in QUERY_SETS if s.kind == "rays"}  # short, quarter, across
+BOX_SETS = {s.label.split("_", 1)[1]: s for s in QUERY_SETS if s.kind == "boxes"}  # small, medium, large
 QUERY_WORDS = {"rays_short": "rays of 4 diameters", "rays_quarter": "rays a quarter of the world long",
                "rays_across": "rays across the world", "boxes_small": "box queries of 1 diameter",
                "boxes_medium": "box queries of 4 diameters", "boxes_large": "box queries of 16 diameters",
