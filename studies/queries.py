@@ -176,6 +176,13 @@ def report(folder: Path, report_to: Path) -> int:
              "(every object holding them). **pairs** is update + pairs in ms a frame; "
              "each set's column is ms per 1000 queries (the median frame); **wrong** counts missed hits and wrong "
              "closest hits against the exact reference on the verified frame (extra answers are allowed).", ""]
+    available = set(engines.available())
+    own_rule = [name for name in sorted(rows.backend.unique())
+                if name in available and not engines.backend_class(name).rays_from_inside]
+    if own_rule:
+        lines[-2] += (f" {', '.join(own_rule)} follow their engine's own rule for a ray that starts inside an object "
+                      "(Box2D leaves that object out; Bullet hits it at 0 or not, by shape and direction): their rays "
+                      "are checked on those that start outside every object.")
     if not complete:
         lines += ["**Interrupted run**: these are the rows so far.", ""]
     lines += ["## Summary: the fastest for the pairs and for each set", "",

@@ -12,8 +12,9 @@ from hypothesis import strategies as st
 import engines
 from interface.queries import check_rays
 from own.query_reference import boxes_meeting, closest_hits, every_ray_hit, points_inside
-from studies.lib.query_runs import SAME_HIT_SHARE
+from studies.lib.query_runs import SAME_HIT_SHARE, starting_outside
 
+ENGINE_HIT_SHARE = 1e-3
 ANSWERING = [n for n in engines.available() if engines.backend_class(n).answers]
 
 
@@ -56,6 +57,7 @@ def test_the_reference_ray_on_hand_made_cases(name, query, shape, expected):
     else:
         assert hit[0] == 0 and t[0] == pytest.approx(expected, abs=1e-12)
     assert len(every_ray_hit(*query, *shape)) == (expected is not None)
+
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -140,14 +142,17 @@ def test_the_reference_rays_agree_with_independent_geometry(dim, data):
 
 def assert_closest_hits(cls, hit, t, want_hit, want_t, lengths):
     """Ours: the reference's bit for bit. An engine's (its own arithmetic, float32 or the circle
-    taken from its box): a hit wherever the reference has one, at the reference's distance within
-    SAME_HIT_SHARE of the ray's length, on the same object or one as close."""
+    taken from its box): a hit wherever the reference has one, on the same object or one as close
+    (within SAME_HIT_SHARE of the ray's length, the study's rule), its distance within
+    ENGINE_HIT_SHARE of the length (Bullet's convex cast converges to about 1e-4 of it)."""
     if cls.exact:
         assert np.array_equal(hit, want_hit) and np.array_equal(t, want_t)
         return
     assert np.array_equal(hit >= 0, want_hit >= 0), "an engine missed a hit, or hit nothing there"
     hits = want_hit >= 0
-    assert np.all(np.abs(t[hits] - want_t[hits]) <= SAME_HIT_SHARE * np.maximum(lengths[hits], 1.0))
+    share = np.abs(t[hits] - want_t[hits]) / np.maximum(lengths[hits], 1.0)
+    assert np.all((share <= SAME_HIT_SHARE) | (hit[hits] == want_hit[hits])), "an engine hit a farther object"
+    assert np.all(share <= ENGINE_HIT_SHARE), f"an engine's hit {share.max():.2g} of the ray's length off"
 
 
 def assert_met(cls, got, want):
@@ -190,9 +195,14 @@ def test_a_backend_answers_every_query_as_the_reference_with_statics_and_spawnin
         o, u, _ = check_rays(origins, directions, lengths, dim)
         hit, t = closest_hits(o, u, lengths, positions[ids], sizes[ids])
         got_hit, got_t = backend.raycast(origins, directions, lengths)
-        assert_closest_hits(cls, got_hit, got_t, np.where(hit >= 0, ids[np.maximum(hit, 0)], -1), t, lengths)
-        for got, want in ((backend.raycast_all(origins, directions, lengths),
-                           every_ray_hit(o, u, lengths, positions[ids], sizes[ids])),
+        # an engine with its own rule for a ray from inside an object is checked on the others
+        checked = np.ones(m, dtype=bool) if cls.rays_from_inside else starting_outside(origins, positions, sizes, alive)
+        assert checked.sum() > m // 2
+        assert_closest_hits(cls, got_hit[checked], got_t[checked],
+                            np.where(hit >= 0, ids[np.maximum(hit, 0)], -1)[checked], t[checked], lengths[checked])
+        every = backend.raycast_all(origins, directions, lengths)
+        every_want = every_ray_hit(o, u, lengths, positions[ids], sizes[ids])
+        for got, want in ((every[checked[every[:, 0]]], every_want[checked[every_want[:, 0]]]),
                           (backend.query_boxes(lo, hi), boxes_meeting(lo, hi, positions[ids], sizes[ids])),
                           (backend.query_points(points), points_inside(points, positions[ids], sizes[ids]))):
             assert_met(cls, got, np.column_stack([want[:, 0], ids[want[:, 1]]]))
@@ -363,3 +373,20 @@ def test_bad_queries_are_one_line_naming_the_problem(call, args, words):
     with pytest.raises(ValueError, match=words) as raised:
         getattr(backend, call)(*args)
     assert "\n" not in str(raised.value)
+
+
+@pytest.mark.parametrize("name", [n for n in ANSWERING if n.startswith("bullet.")])
+def test_bullet_s_ray_threads_must_be_a_count(name):
+    with pytest.raises(ValueError, match="ray_threads must be an integer >= 0"):
+        engines.create(name, ray_threads=-1).reset(np.zeros((2, 2)), radii=np.ones(2))
+
+
+@pytest.mark.parametrize("name", [n for n in ANSWERING if n.startswith("box2d.")])
+def test_box2d_refuses_a_query_past_float32_in_one_line(name):
+    backend = engines.create(name)
+    backend.reset(np.array([[0.0, 0.0], [5.0, 0.0]]), radii=np.ones(2))
+    with pytest.raises(ValueError, match="past float32's range"):
+        backend.raycast([[0.0, 0.0]], [[1.0, 0.0]], 1e300)
+    with pytest.raises(ValueError, match="past float32's range"):
+        backend.query_boxes([[-1e39, 0.0]], [[0.0, 1.0]])
+    assert backend.raycast([[-5.0, 0.0]], [[1.0, 0.0]], 10.0)[0].tolist() == [0]

@@ -9,7 +9,7 @@ import pytest
 
 from studies import queries as queries_study
 from studies.lib.cli import run_cli
-from studies.lib.query_runs import QUERY_SETS, QuerySet, compare, frame_queries
+from studies.lib.query_runs import QUERY_SETS, QuerySet, compare, frame_queries, starting_outside
 
 RAYS, BOXES = QuerySet("rays_across", "rays", world=1.0), QuerySet("boxes_small", "boxes", span=1.0)
 
@@ -55,6 +55,8 @@ def test_compare_counts_missed_wrong_and_extra_answers():
     assert compare(RAYS, got, want, lengths) == {"found": 3, "missed": 1, "wrong": 0, "extra": 1}
     got = (np.array([3, -1, 5, 1]), np.array([1.0, np.inf, 2.0, 6.0]))  # ray 3: a farther object
     assert compare(RAYS, got, want, lengths)["wrong"] == 1
+    compared = np.array([True, True, False, True])  # ray 2 starts inside an object: not compared
+    assert compare(RAYS, got, want, lengths, compared) == {"found": 2, "missed": 0, "wrong": 1, "extra": 0}
     want_pairs = np.array([[0, 1], [0, 4], [2, 4]])
     got_pairs = np.array([[0, 1], [1, 4], [2, 4], [2, 5]])
     assert compare(BOXES, got_pairs, want_pairs, None) == {"found": 4, "missed": 1, "wrong": 0, "extra": 2}
@@ -82,3 +84,12 @@ def test_bad_options_are_one_line(argv, words, capsys, tmp_path):
     assert not (tmp_path / "q").exists()  # refused before --out is touched
     err = capsys.readouterr().err
     assert words in err and len(err.strip().splitlines()) == 1
+
+
+def test_rays_are_checked_where_they_start_outside_for_an_engine_with_its_own_rule():
+    """Box2D and Bullet answer a ray from inside an object by their own rule: the rays checked
+    are those whose origin no object alive holds (a dead object's ball does not count)."""
+    positions, radii = np.array([[0.0, 0.0], [10.0, 0.0]]), np.array([1.0, 2.0])
+    origins = np.array([[0.5, 0.0], [3.0, 0.0], [10.0, 1.9], [1.0, 0.0]])
+    assert starting_outside(origins, positions, radii, None).tolist() == [False, True, False, False]
+    assert starting_outside(origins, positions, radii, np.array([False, True])).tolist() == [True, True, False, True]

@@ -13,6 +13,13 @@ keeps positions in float32. Both take statics and spawning natively: static obje
 static bodies (never moved, never paired with each other; v3 keeps them in a tree of their own),
 and an object that appears or goes is a body created or destroyed (2.3) or enabled or disabled
 (3.1), which inserts or removes its proxies in the broad phase.
+
+Queries natively, one call a query (neither binding takes a batch): rays through the world's ray
+cast (2.3: `RayCast` with a callback; 3.1: `cast_ray_closest`, and `cast_ray` with a callback for
+every hit), in float32, leaving out a shape that holds the ray's origin (Box2D's rule, stated as
+rays_from_inside = False); boxes and points through the world's AABB query (`QueryAABB`,
+`overlap_aabb`): the shapes whose fat boxes in its trees overlap the box, candidates as its pairs
+are.
 """
 
 from __future__ import annotations
@@ -28,6 +35,21 @@ FRAME_DT = 1.0 / 60.0
 FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
+def within_float32(name: str, *arrays: np.ndarray) -> None:
+    """A one-line ValueError where a query reaches past float32's range, in which Box2D computes
+    (2.3's binding raises from deep inside; 3.1's would turn it into inf)."""
+    for values in arrays:
+        if len(values) and np.abs(values).max() > FLOAT32_MAX:
+            raise ValueError(f"{name}: a query reaches past float32's range ({FLOAT32_MAX:.3g}), "
+                             "in which Box2D computes")
+
+
+def ray_ends(name: str, origins: np.ndarray, directions: np.ndarray, lengths: np.ndarray) -> None:
+    """The rays' ends checked against float32's range, as Box2D takes a ray: origin and translation."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        within_float32(name, origins, np.nan_to_num(lengths[:, None] * directions, nan=np.inf))
+
+
 class Box2DV2(BroadPhase):
     """Box2D 2.3's dynamic tree: fat boxes (0.1 units of margin, stretched along the motion) and
     the pairs of overlapping fat boxes kept as contacts between steps."""
@@ -38,6 +60,8 @@ class Box2DV2(BroadPhase):
     reports = "boxes"
     lifecycle = "native"
     shapes = ("balls", "boxes")
+    answers = ("rays", "boxes", "points")
+    rays_from_inside = False
     # Objects at one point: 500 took 4 s, 1000 took 48 s (a contact for each of their 499,500
     # pairs), 2000 gave no answer in 180 s.
     limits = Limits(coordinate=FLOAT32_MAX, radius=FLOAT32_MAX, coincident=500,
@@ -52,6 +76,7 @@ class Box2DV2(BroadPhase):
         for i in np.flatnonzero(alive).tolist():
             self._create(i, positions[i])
         self._find_movers()
+        self._stepped = False
 
     def _create(self, i: int, xy: np.ndarray) -> None:
         """A static body for a static object (never moved, never paired with another static)."""
@@ -79,9 +104,11 @@ class Box2DV2(BroadPhase):
             self._find_movers()
         for body, xy in zip(self._moving_bodies, positions[self._movers].tolist()):
             body.position = xy
+        self._stepped = False  # the tree moves the proxies at the next Step
 
     def _pairs(self):
         self._world.Step(FRAME_DT, 1, 1)
+        self._stepped = True
         contacts = self._world.contacts
         if not contacts:
             return EMPTY_PAIRS.copy()
@@ -90,8 +117,83 @@ class Box2DV2(BroadPhase):
         self._stats = {"contacts": len(contacts)}
         return canonical(a, b)
 
+    def _stepped_world(self):
+        """The world with its tree holding this frame's boxes: a query after an update whose pairs
+        were not asked steps it first (bodies set by hand move their proxies only in a Step)."""
+        if not self._stepped:
+            self._world.Step(FRAME_DT, 1, 1)
+            self._stepped = True
+        return self._world
+
+    def _closest_hits(self, origins, directions, lengths):
+        ray_ends(self.name, origins, directions, lengths)
+        world, closest = self._stepped_world(), _ClosestHit()
+        hit, at = [-1] * len(origins), [np.inf] * len(origins)
+        for q, ((ox, oy), (ux, uy), length) in enumerate(zip(origins.tolist(), directions.tolist(), lengths.tolist(),
+                                                             strict=True)):
+            if length > 0.0:  # Box2D 2.3 asserts on a ray of no length; by its rule it would hit nothing
+                closest.hit = -1
+                world.RayCast(closest, (ox, oy), (ox + length * ux, oy + length * uy))
+                if closest.hit >= 0:
+                    hit[q], at[q] = closest.hit, closest.fraction * length
+        return np.array(hit, dtype=np.int64), np.array(at)
+
+    def _every_hit(self, origins, directions, lengths):
+        ray_ends(self.name, origins, directions, lengths)
+        world, every = self._stepped_world(), _EveryHit()
+        for q, ((ox, oy), (ux, uy), length) in enumerate(zip(origins.tolist(), directions.tolist(), lengths.tolist(),
+                                                             strict=True)):
+            if length > 0.0:
+                every.query = q
+                world.RayCast(every, (ox, oy), (ox + length * ux, oy + length * uy))
+        return np.array(every.found, dtype=np.int64).reshape(-1, 2)
+
+    def _boxes_met(self, lo, hi):
+        within_float32(self.name, lo, hi)
+        world, met = self._stepped_world(), _Overlapping()
+        for q, (low, high) in enumerate(zip(lo.tolist(), hi.tolist(), strict=True)):
+            met.query = q
+            world.QueryAABB(met, Box2D.b2AABB(lowerBound=low, upperBound=high))
+        return np.array(met.found, dtype=np.int64).reshape(-1, 2)
+
+    def _points_met(self, points):
+        return self._boxes_met(points, points)
+
     def close(self):
         self._bodies, self._moving_bodies, self._world = [], [], None
+
+
+class _ClosestHit(Box2D.b2RayCastCallback):
+    """Box2D 2.3's ray callback for the closest hit: each report clips the ray to itself, so the
+    last one reported is the closest."""
+
+    def ReportFixture(self, fixture, point, normal, fraction):
+        self.hit, self.fraction = fixture.userData, fraction
+        return fraction
+
+
+class _EveryHit(Box2D.b2RayCastCallback):
+    """Box2D 2.3's ray callback for every hit: each report keeps the whole ray (1)."""
+
+    def __init__(self):
+        super().__init__()
+        self.query, self.found = 0, []
+
+    def ReportFixture(self, fixture, point, normal, fraction):
+        self.found.append((self.query, fixture.userData))
+        return 1.0
+
+
+class _Overlapping(Box2D.b2QueryCallback):
+    """Box2D 2.3's AABB query callback: every fixture whose fat box overlaps the query's."""
+
+    def __init__(self):
+        super().__init__()
+        self.query, self.found = 0, []
+
+    def ReportFixture(self, fixture):
+        self.found.append((self.query, fixture.userData))
+        return True
 
 
 class Box2DV3(BroadPhase):
@@ -103,6 +205,8 @@ class Box2DV3(BroadPhase):
     reports = "contacts"
     lifecycle = "native"
     shapes = ("balls", "boxes")
+    answers = ("rays", "boxes", "points")
+    rays_from_inside = False
 
     def _reset(self, positions, radii):
         self._world = pyb2d3.World(gravity=(0.0, 0.0))
@@ -182,6 +286,40 @@ class Box2DV3(BroadPhase):
         if at != last:
             moved = int(self._keys[last])
             self._keys[at], self._slot[moved] = moved, at
+
+    def _closest_hits(self, origins, directions, lengths):
+        ray_ends(self.name, origins, directions, lengths)
+        cast = self._world.cast_ray_closest
+        hit, at = [-1] * len(origins), [np.inf] * len(origins)
+        for q, ((ox, oy), (ux, uy), length) in enumerate(zip(origins.tolist(), directions.tolist(), lengths.tolist(),
+                                                             strict=True)):
+            found = cast((ox, oy), (length * ux, length * uy))
+            if found.hit:
+                hit[q], at[q] = found.shape.user_data, found.fraction * length
+        return np.array(hit, dtype=np.int64), np.array(at)
+
+    def _every_hit(self, origins, directions, lengths):
+        ray_ends(self.name, origins, directions, lengths)
+        found: list[tuple[int, int]] = []
+        for q, ((ox, oy), (ux, uy), length) in enumerate(zip(origins.tolist(), directions.tolist(), lengths.tolist(),
+                                                             strict=True)):
+            # the callback's answer 1 keeps the whole ray: every shape on it is reported
+            self._world.cast_ray((ox, oy), (length * ux, length * uy),
+                                 lambda shape, point, normal, fraction, q=q: found.append((q, shape.user_data)) or 1.0)
+        return np.array(found, dtype=np.int64).reshape(-1, 2)
+
+    def _boxes_met(self, lo, hi):
+        within_float32(self.name, lo, hi)
+        found: list[tuple[int, int]] = []
+        box = pyb2d3.AABB()
+        for q, (lx, ly, hx, hy) in enumerate(zip(lo[:, 0].tolist(), lo[:, 1].tolist(), hi[:, 0].tolist(),
+                                                 hi[:, 1].tolist(), strict=True)):
+            box.lower_bound, box.upper_bound = (lx, ly), (hx, hy)
+            self._world.overlap_aabb(box, lambda shape, q=q: found.append((q, shape.user_data)))
+        return np.array(found, dtype=np.int64).reshape(-1, 2)
+
+    def _points_met(self, points):
+        return self._boxes_met(points, points)
 
     def close(self):
         world = getattr(self, "_world", None)

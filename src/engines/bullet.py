@@ -18,6 +18,12 @@ contacts on their own: slower (each call scans every contact manifold), never co
 Statics and spawning natively: a static object is a body of mass 0 (Bullet's static set, never
 moved, never paired with another static), an object that appears or goes is a body created or
 removed.
+
+Queries natively: rays through `rayTestBatch` (Bullet's own batch, threaded; its ray tests leave
+out a shape that holds the ray's origin, and so a ray of zero length hits nothing: its convention,
+stated as rays_from_inside = False), every hit of a ray as its n-th hit (`reportHitNumber`), one
+pass per rank; boxes and points through `getOverlappingObjects` (the tree's fat boxes: candidates,
+as its pairs are), one call a query.
 """
 
 from __future__ import annotations
@@ -32,6 +38,9 @@ with native_output_silenced():  # pybullet prints its build time from C on impor
 from interface.base import BroadPhase, Limits, halves_in_3d, in_3d
 from interface.pairs import canonical
 
+# pybullet refuses a batch of more than 16384 rays, and answers one of exactly 16384 with 16383
+# hits (measured): batches are kept well under.
+RAY_BATCH = 8192
 CONTACTS_IN_ONE_CALL = 47_662  # pybullet's most contact points in one reply; more come back corrupt
 BULK_BELOW = CONTACTS_IN_ONE_CALL // 2  # read in one call while the last frame had fewer than this
 
@@ -43,6 +52,9 @@ class _Bullet(BroadPhase):
     dims = (2, 3)
     shapes = ("balls", "boxes")
     reset_flags = 0
+    answers = ("rays", "boxes", "points")
+    rays_from_inside = False
+    defaults = {"ray_threads": 0}  # rayTestBatch's numThreads: 0 takes every core
     breaks = ("Bullet stops simulating a non-static object whose AABB extent has a squared length of 1e12 or more "
               "(btCollisionWorld::updateSingleAabb), i.e. spheres of radius ~5.8e5 and up; it cannot create spheres "
               "of radius 0. Its margins are absolute, larger than a scene scaled by 1e-6: see its time and memory "
@@ -60,6 +72,7 @@ class _Bullet(BroadPhase):
     def _reset(self, positions, radii):
         if self.n and radii.ndim == 1 and radii.min() == 0.0:  # a box of zero width it creates (and misses: tests)
             raise ValueError(f"{self.name}: Bullet cannot create a sphere of radius 0 (object {int(radii.argmin())})")
+        self._int_param("ray_threads", 0)
         self._call(pybullet.resetSimulation, self.reset_flags)
         self._last_points = None  # the last frame's contact points; None until a frame is read
         self._call(pybullet.setGravity, 0.0, 0.0, 0.0)
@@ -136,6 +149,48 @@ class _Bullet(BroadPhase):
         for uid in self._mover_ids:
             points.extend(read(bodyA=uid, physicsClientId=client))
         return points
+
+    def _rays(self, origins, directions, lengths, rank: int = -1):
+        """(hit body's object or -1, fraction of the length) of each ray through rayTestBatch, in
+        batches; `rank` k >= 0 asks each ray's k-th hit along it instead of its closest."""
+        threads = self._int_param("ray_threads", 0)
+        starts, ends = in_3d(origins), in_3d(origins + lengths[:, None] * directions)
+        hit, fraction = np.full(len(origins), -1, dtype=np.int64), np.ones(len(origins))
+        for at in range(0, len(origins), RAY_BATCH):
+            batch = slice(at, at + RAY_BATCH)
+            got = self._call(pybullet.rayTestBatch, starts[batch].tolist(), ends[batch].tolist(), numThreads=threads,
+                             reportHitNumber=rank)
+            bodies = np.fromiter((r[0] for r in got), dtype=np.int64, count=len(got))
+            hit[at:at + len(got)] = np.where(bodies >= 0, self._index[np.maximum(bodies, 0)], -1)
+            fraction[at:at + len(got)] = np.fromiter((r[2] for r in got), dtype=float, count=len(got))
+        return hit, fraction
+
+    def _closest_hits(self, origins, directions, lengths):
+        hit, fraction = self._rays(origins, directions, lengths)
+        return hit, np.where(hit >= 0, fraction * lengths, np.inf)
+
+    def _every_hit(self, origins, directions, lengths):
+        """The hits rank by rank (the first, the second...), each pass asking the rays still hitting."""
+        found, asking, rank = [], np.arange(len(origins)), 0
+        while len(asking):
+            hit, _ = self._rays(origins[asking], directions[asking], lengths[asking], rank)
+            asking = asking[hit >= 0]
+            found.append(np.column_stack([asking, hit[hit >= 0]]))
+            rank += 1
+        return np.concatenate(found) if found else np.empty((0, 2), dtype=np.int64)
+
+    def _boxes_met(self, lo, hi):
+        """Every body whose fat box overlaps each query box (2D boxes: the plane z = 0)."""
+        overlapping, client, index = pybullet.getOverlappingObjects, self._client, self._index
+        found = []
+        for q, (low, high) in enumerate(zip(in_3d(lo).tolist(), in_3d(hi).tolist(), strict=True)):
+            bodies = overlapping(low, high, physicsClientId=client)
+            if bodies:
+                found.extend((q, int(index[uid])) for uid, _ in bodies)
+        return np.array(found, dtype=np.int64).reshape(-1, 2)
+
+    def _points_met(self, points):
+        return self._boxes_met(points, points)
 
     def close(self):
         if self._client is not None and self._client >= 0:

@@ -13,6 +13,14 @@ come back too. Rapier computes in float32 here. Statics and spawning natively: a
 a collider that keeps Rapier's default collision types, which skip pairs of two fixed colliders
 (the moving ones take every type, so they still pair with statics), and is never moved; an object
 that appears or goes is a collider inserted or removed.
+
+Queries natively, through Rapier's `QueryPipeline` over the same BVH, one call a query: rays by
+`cast_ray` (closest) and `intersect_ray` (every hit), solid (a ray starting inside a shape hits it
+at 0, the interface's rule); a ray of no length, which `cast_ray` never reports, by
+`intersect_point` at its origin (what holds the point is what such a ray meets); boxes by
+`intersect_aabb_conservative` (the BVH's boxes: candidates, as its pairs are); points by
+`intersect_point` (the shapes holding the point, exactly). A query after an update whose pairs
+were not asked refreshes the BVH first (`QueryPipeline.update`), as a step would.
 """
 
 from __future__ import annotations
@@ -42,6 +50,7 @@ class RapierBvh(BroadPhase):
     lifecycle = "native"
     dims = (2, 3)
     shapes = ("balls", "boxes")
+    answers = ("rays", "boxes", "points")
     sweeps = (Knob("prediction", fixed([1e-4, 0.002, 0.02, 0.2, 2.0]), "prediction distance"),)
 
     def _reset(self, positions, radii):
@@ -60,6 +69,8 @@ class RapierBvh(BroadPhase):
         self._bodies, self._islands = rapier3d.RigidBodySet(), rapier3d.IslandManager()
         self._broad, self._narrow = rapier3d.BroadPhaseBvh(), rapier3d.NarrowPhase()
         self._pipeline = rapier3d.CollisionPipeline()
+        self._queries = rapier3d.QueryPipeline(self._broad, self._narrow, self._bodies, self._colliders)
+        self._stepped = False
 
     def _insert(self, k: int, xyz: list[float]) -> None:
         kinds = rapier3d.ActiveCollisionTypes.default_types() if self._static[k] else rapier3d.ActiveCollisionTypes.all()
@@ -89,6 +100,7 @@ class RapierBvh(BroadPhase):
         colliders = self._colliders
         for handle, xyz in zip(self._mover_handles, in_3d(positions[self._movers]).tolist()):
             colliders[handle].translation = xyz
+        self._stepped = False
 
     def _reshape(self, positions):
         """Boxes took new extents (bodies rotated): each changed collider gets its new cuboid."""
@@ -102,6 +114,7 @@ class RapierBvh(BroadPhase):
     def _pairs(self):
         self._pipeline.step(float(self.params["prediction"]), self._islands, self._broad, self._narrow, self._bodies,
                             self._colliders)
+        self._stepped = True
         found = self._narrow.contact_pairs()
         if not found:
             return EMPTY_PAIRS.copy()
@@ -110,5 +123,59 @@ class RapierBvh(BroadPhase):
         self._stats = {"pairs": len(found)}
         return np.column_stack([np.minimum(a, b), np.maximum(a, b)])
 
+    def _query_pipeline(self):
+        """Rapier's scene queries over its BVH as of this frame: refreshed where the colliders moved
+        since the last step (a query after an update whose pairs were not asked)."""
+        if not self._stepped:
+            self._queries.update(self._bodies, self._colliders)
+            self._stepped = True
+        return self._queries
+
+    def _closest_hits(self, origins, directions, lengths):
+        queries, object_of = self._query_pipeline(), self._object_of
+        hit, at = [-1] * len(origins), [np.inf] * len(origins)
+        for q, (o, u, length) in enumerate(zip(in_3d(origins).tolist(), in_3d(directions).tolist(), lengths.tolist(),
+                                               strict=True)):
+            if length == 0.0:  # cast_ray reports nothing up to 0: the shapes holding the origin, the lowest
+                held = self._holding(queries, o)
+                if held:
+                    hit[q], at[q] = min(held), 0.0
+                continue
+            found = queries.cast_ray(rapier3d.Ray(o, u), length, True)
+            if found is not None:
+                hit[q], at[q] = int(object_of[found[0].index]), found[1]
+        return np.array(hit, dtype=np.int64), np.array(at)
+
+    def _every_hit(self, origins, directions, lengths):
+        queries, object_of = self._query_pipeline(), self._object_of
+        found: list[tuple[int, int]] = []
+        for q, (o, u, length) in enumerate(zip(in_3d(origins).tolist(), in_3d(directions).tolist(), lengths.tolist(),
+                                               strict=True)):
+            if length == 0.0:
+                found.extend((q, k) for k in self._holding(queries, o))
+                continue
+            queries.intersect_ray(rapier3d.Ray(o, u), length, True,
+                                  lambda handle, _, q=q: found.append((q, int(object_of[handle.index]))) or True)
+        return np.array(found, dtype=np.int64).reshape(-1, 2)
+
+    def _holding(self, queries, point: list[float]) -> list[int]:
+        """The objects whose shapes hold the point (Rapier's intersect_point)."""
+        held: list[int] = []
+        queries.intersect_point(point, lambda handle: held.append(int(self._object_of[handle.index])) or True)
+        return held
+
+    def _boxes_met(self, lo, hi):
+        queries, object_of = self._query_pipeline(), self._object_of
+        found: list[tuple[int, int]] = []
+        for q, (low, high) in enumerate(zip(in_3d(lo).tolist(), in_3d(hi).tolist(), strict=True)):
+            queries.intersect_aabb_conservative(
+                rapier3d.Aabb(low, high), lambda handle, q=q: found.append((q, int(object_of[handle.index]))) or True)
+        return np.array(found, dtype=np.int64).reshape(-1, 2)
+
+    def _points_met(self, points):
+        queries = self._query_pipeline()
+        found = [(q, k) for q, point in enumerate(in_3d(points).tolist()) for k in self._holding(queries, point)]
+        return np.array(found, dtype=np.int64).reshape(-1, 2)
+
     def close(self):
-        self._colliders = self._pipeline = None
+        self._colliders = self._pipeline = self._queries = None

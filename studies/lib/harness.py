@@ -163,9 +163,10 @@ def measure(job: Job, traj: Trajectory, repeat: int, ready: Callable[[], None] |
         narrow_phase(traj.positions[0], traj.sizes_at(0), first)
         compiling = (clock.seconds if clock else 0.0) - compiling
         setup = time.perf_counter() - start - compiling
-        if job.queries:  # a few asked on the warm-up frame, untimed: a query's kernels load at their first call
+        if job.queries:  # asked whole on the warm-up frame, untimed, within the budget: a query's kernels load
+            # at their first call, and the first batches' answers (fresh memory) cost more than a running frame's
             frame_query_columns(backend, job.queries, traj.positions[0], traj.sizes_at(0), traj.alive_at(0), 0,
-                                verified=False, most=8)
+                                verified=False, budget_s=job.budget_s)
         if ready:
             ready()
         rows = []
