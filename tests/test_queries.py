@@ -190,7 +190,9 @@ def test_a_backend_answers_every_query_as_the_reference_with_statics_and_spawnin
     lo = rng.uniform(0, 100, (m, dim))
     hi = lo + rng.uniform(0, 20, (m, dim))
     points = rng.uniform(0, 100, (m, dim))
-    for _ in range(2):
+    for pairs_first in (False, True):  # queries right after an update, and after a frame's pairs (a step)
+        if pairs_first:
+            backend.pairs()
         ids = np.flatnonzero(alive)
         o, u, _ = check_rays(origins, directions, lengths, dim)
         hit, t = closest_hits(o, u, lengths, positions[ids], sizes[ids])

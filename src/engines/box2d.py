@@ -240,6 +240,7 @@ class Box2DV3(BroadPhase):
         # last key into the freed slot), so that pairs() needs no loop over the pairs.
         self._keys = np.empty(max(16, self.n), np.int64)
         self._slot: dict[int, int] = {}
+        self._displaced = False
 
     def _update(self, positions):
         for i in self.removed.tolist():  # its proxy leaves the broad phase, its contacts end
@@ -249,6 +250,7 @@ class Box2DV3(BroadPhase):
         for i in self.spawned.tolist():  # a proxy inserted where the object now is
             self._handles[i].enabled = True
         self._bodies.set_linear_velocities(self._still)  # the solver pushed last frame's contacts apart
+        self._displaced = False
 
     def _reshape(self, positions):
         """Boxes took new extents (bodies rotated): each changed shape gets its new box polygon."""
@@ -259,6 +261,7 @@ class Box2DV3(BroadPhase):
 
     def _pairs(self):
         self._world.step(FRAME_DT, 1)
+        self._displaced = True  # the step's solver pushed touching bodies apart
         events = self._world.get_contact_events()
         n = self.n
         for event in events.end_events():
@@ -287,9 +290,17 @@ class Box2DV3(BroadPhase):
             moved = int(self._keys[last])
             self._keys[at], self._slot[moved] = moved, at
 
+    def _frame_world(self):
+        """The world with every body where this frame put it: after a step, whose solver pushed
+        touching bodies apart, the frame's transforms go in again (one batch call) before a query."""
+        if self._displaced:
+            self._bodies.set_transforms(self._transforms)
+            self._displaced = False
+        return self._world
+
     def _closest_hits(self, origins, directions, lengths):
         ray_ends(self.name, origins, directions, lengths)
-        cast = self._world.cast_ray_closest
+        cast = self._frame_world().cast_ray_closest
         hit, at = [-1] * len(origins), [np.inf] * len(origins)
         for q, ((ox, oy), (ux, uy), length) in enumerate(zip(origins.tolist(), directions.tolist(), lengths.tolist(),
                                                              strict=True)):
@@ -300,22 +311,21 @@ class Box2DV3(BroadPhase):
 
     def _every_hit(self, origins, directions, lengths):
         ray_ends(self.name, origins, directions, lengths)
-        found: list[tuple[int, int]] = []
+        world, found = self._frame_world(), []
         for q, ((ox, oy), (ux, uy), length) in enumerate(zip(origins.tolist(), directions.tolist(), lengths.tolist(),
                                                              strict=True)):
             # the callback's answer 1 keeps the whole ray: every shape on it is reported
-            self._world.cast_ray((ox, oy), (length * ux, length * uy),
+            world.cast_ray((ox, oy), (length * ux, length * uy),
                                  lambda shape, point, normal, fraction, q=q: found.append((q, shape.user_data)) or 1.0)
         return np.array(found, dtype=np.int64).reshape(-1, 2)
 
     def _boxes_met(self, lo, hi):
         within_float32(self.name, lo, hi)
-        found: list[tuple[int, int]] = []
-        box = pyb2d3.AABB()
+        world, found, box = self._frame_world(), [], pyb2d3.AABB()
         for q, (lx, ly, hx, hy) in enumerate(zip(lo[:, 0].tolist(), lo[:, 1].tolist(), hi[:, 0].tolist(),
                                                  hi[:, 1].tolist(), strict=True)):
             box.lower_bound, box.upper_bound = (lx, ly), (hx, hy)
-            self._world.overlap_aabb(box, lambda shape, q=q: found.append((q, shape.user_data)))
+            world.overlap_aabb(box, lambda shape, q=q: found.append((q, shape.user_data)))
         return np.array(found, dtype=np.int64).reshape(-1, 2)
 
     def _points_met(self, points):
