@@ -316,7 +316,7 @@ class Box2DV3(BroadPhase):
                                                              strict=True)):
             # the callback's answer 1 keeps the whole ray: every shape on it is reported
             world.cast_ray((ox, oy), (length * ux, length * uy),
-                                 lambda shape, point, normal, fraction, q=q: found.append((q, shape.user_data)) or 1.0)
+                           lambda shape, point, normal, fraction, q=q: found.append((q, shape.user_data)) or 1.0)
         return np.array(found, dtype=np.int64).reshape(-1, 2)
 
     def _boxes_met(self, lo, hi):
