@@ -13,6 +13,12 @@ in steps of 2^-60). FCL takes such a matrix as the identity (Eigen's isIdentity,
 boxes the sphere exactly as unrotated, so its boxes are again bit for bit the spheres' own.
 Boxes are FCL boxes of their extents (2D boxes as deep as they are wide); a box under that
 rotation is boxed up to 1e-12 of its size wider, which can only add touching candidates.
+
+Box and point queries natively: each query box (a point: a box of no size) is a collision object
+collided with the manager (`collide(object, data, callback)`), the callback seeing each object whose
+box FCL's tree finds overlapping it: candidates, as its pairs are. The query object carries a tag
+no object has (z = -5e-324 in 2D, 2D query boxes 1 deep at z = 0; in 3D a rotation naming an index
+past every object's). FCL has no ray query: it answers no rays.
 """
 
 from __future__ import annotations
@@ -27,6 +33,8 @@ TINY_RADIUS = 1e-300
 INDEX_STEP = 5e-324  # the smallest subnormal double
 # Spheres: the index in a rotation FCL takes as the identity (entries within 1e-12 of it).
 ROTATION_STEP, ROTATION_SPAN = 2.0**-60, 1 << 20  # (2^20 - 1) * 2^-60 = 9.1e-13
+QUERY_TAG = -1  # a query object's index, which no object has (2D: z = -5e-324)
+QUERY_TAG_3D = ROTATION_SPAN * ROTATION_SPAN - 1  # in 3D, past every object's index
 
 
 def _collect(o1, o2, found: list) -> bool:
@@ -55,6 +63,7 @@ class FclTree(BroadPhase):
     # Its tree multiplies box sizes: past ~1e154 (the square root of the largest double) they
     # overflow and it segfaults (coordinates of 1.5e154, or radii of 1e154, in 50-object scenes).
     limits = Limits(coordinate=1e150, radius=1e150, why="FCL's tree overflows and crashes on boxes beyond ~1e154")
+    answers = ("boxes", "points")
     method = "tree"
     exact = False
     reports = "boxes"
@@ -99,3 +108,36 @@ class FclTree(BroadPhase):
             self._manager.collide(found, _collect)
             index = np.rint(np.asarray(found, dtype=np.float64) / INDEX_STEP).astype(np.int64)
         return canonical(index[0::2], index[1::2])
+
+    def _boxes_met(self, lo, hi):
+        """Each query box collided with the manager as an object of its own: every object whose box
+        FCL's tree finds overlapping it."""
+        if len(lo) and max(np.abs(lo).max(), np.abs(hi).max()) > self.limits.coordinate:
+            raise ValueError(f"{self.name}: a query box reaches past {self.limits.coordinate:.0e}, "
+                             "where FCL's tree overflows and crashes")
+        # FCL boxes the query as centre -+ half its sides: a few ulps wider, so that rounding there
+        # never shrinks it below lo..hi (a touching object would be lost; a wider box adds candidates)
+        pad = 4.0 * np.spacing(np.maximum(np.abs(lo), np.abs(hi)))
+        low, high = lo - pad, hi + pad
+        centres, sides = 0.5 * (low + high), high - low
+        found = []
+        for q, (centre, side) in enumerate(zip(centres.tolist(), sides.tolist(), strict=True)):
+            if self.dim == 3:
+                query = fcl.CollisionObject(fcl.Box(*side), fcl.Transform(tagging_rotation(QUERY_TAG_3D), centre))
+                tags: list = []
+                self._manager.collide(query, tags, _collect_rotated)
+                parts = np.rint(np.asarray(tags, dtype=np.float64).reshape(-1, 2) / ROTATION_STEP).astype(np.int64)
+                index = parts[:, 0] + parts[:, 1] * ROTATION_SPAN
+                index = index[index != QUERY_TAG_3D]
+            else:  # 1 deep at z = 0: it meets every object's z interval
+                query = fcl.CollisionObject(fcl.Box(side[0], side[1], 1.0),
+                                            fcl.Transform(np.array([centre[0], centre[1], QUERY_TAG * INDEX_STEP])))
+                tags = []
+                self._manager.collide(query, tags, _collect)
+                index = np.rint(np.asarray(tags, dtype=np.float64) / INDEX_STEP).astype(np.int64)
+                index = index[index != QUERY_TAG]
+            found.append(np.column_stack([np.full(len(index), q, dtype=np.int64), index]))
+        return np.concatenate(found) if found else np.empty((0, 2), dtype=np.int64)
+
+    def _points_met(self, points):
+        return self._boxes_met(points, points)
