@@ -59,7 +59,6 @@ def test_the_reference_ray_on_hand_made_cases(name, query, shape, expected):
     assert len(every_ray_hit(*query, *shape)) == (expected is not None)
 
 
-
 @pytest.mark.parametrize("dim", [2, 3])
 def test_the_closest_hit_of_equal_distance_is_the_lowest_id(dim):
     positions = np.zeros((3, dim))

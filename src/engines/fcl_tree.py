@@ -97,16 +97,19 @@ class FclTree(BroadPhase):
                 obj.setTranslation(np.array((x, y, i * INDEX_STEP)))
         self._manager.update()
 
-    def _pairs(self):
+    def _collided(self, *query) -> np.ndarray:
+        """The objects of each pair the manager's collide reports (two indices a pair, in order),
+        decoded from their tags: its pairs, or with `query` (one object) what meets that object."""
+        tags: list = []
         if self.dim == 3:
-            tags: list[tuple[float, float]] = []
-            self._manager.collide(tags, _collect_rotated)
+            self._manager.collide(*query, tags, _collect_rotated)
             parts = np.rint(np.asarray(tags, dtype=np.float64).reshape(-1, 2) / ROTATION_STEP).astype(np.int64)
-            index = parts[:, 0] + parts[:, 1] * ROTATION_SPAN
-        else:
-            found: list[float] = []
-            self._manager.collide(found, _collect)
-            index = np.rint(np.asarray(found, dtype=np.float64) / INDEX_STEP).astype(np.int64)
+            return parts[:, 0] + parts[:, 1] * ROTATION_SPAN
+        self._manager.collide(*query, tags, _collect)
+        return np.rint(np.asarray(tags, dtype=np.float64) / INDEX_STEP).astype(np.int64)
+
+    def _pairs(self):
+        index = self._collided()
         return canonical(index[0::2], index[1::2])
 
     def _boxes_met(self, lo, hi):
@@ -120,22 +123,16 @@ class FclTree(BroadPhase):
         pad = 4.0 * np.spacing(np.maximum(np.abs(lo), np.abs(hi)))
         low, high = lo - pad, hi + pad
         centres, sides = 0.5 * (low + high), high - low
+        tag, rotation = (QUERY_TAG_3D, tagging_rotation(QUERY_TAG_3D)) if self.dim == 3 else (QUERY_TAG, None)
         found = []
         for q, (centre, side) in enumerate(zip(centres.tolist(), sides.tolist(), strict=True)):
             if self.dim == 3:
-                query = fcl.CollisionObject(fcl.Box(*side), fcl.Transform(tagging_rotation(QUERY_TAG_3D), centre))
-                tags: list = []
-                self._manager.collide(query, tags, _collect_rotated)
-                parts = np.rint(np.asarray(tags, dtype=np.float64).reshape(-1, 2) / ROTATION_STEP).astype(np.int64)
-                index = parts[:, 0] + parts[:, 1] * ROTATION_SPAN
-                index = index[index != QUERY_TAG_3D]
+                query = fcl.CollisionObject(fcl.Box(*side), fcl.Transform(rotation, centre))
             else:  # 1 deep at z = 0: it meets every object's z interval
                 query = fcl.CollisionObject(fcl.Box(side[0], side[1], 1.0),
                                             fcl.Transform(np.array([centre[0], centre[1], QUERY_TAG * INDEX_STEP])))
-                tags = []
-                self._manager.collide(query, tags, _collect)
-                index = np.rint(np.asarray(tags, dtype=np.float64) / INDEX_STEP).astype(np.int64)
-                index = index[index != QUERY_TAG]
+            index = self._collided(query)
+            index = index[index != tag]
             found.append(np.column_stack([np.full(len(index), q, dtype=np.int64), index]))
         return np.concatenate(found) if found else np.empty((0, 2), dtype=np.int64)
 
