@@ -158,18 +158,22 @@ def verdict(groups: list[list[Entry]], entries: list[Entry], traits: Traits, que
 
 def decided_by(win: Entry, eligible: list[Entry], queries: str) -> str:
     """Whether the pairs or the queries decided: the fastest for the pairs alone (update, pairs and
-    narrow phase, the frame less its queries) against the winner."""
+    narrow phase, the frame less its queries) against the winner, each at the setting it was tuned
+    to for the whole frame (tuned for the pairs alone, a backend may do better: a run without the
+    queries says)."""
     def pairs_ms(e: Entry) -> float:
         return e.trial.median_ms - e.trial.queries_ms
 
     alone = min(eligible, key=pairs_ms)
+    setting = ", each at its setting for the whole frame" if any(e.tuned for e in eligible) else ""
     share = win.trial.queries_ms / win.trial.median_ms
     if alone is win:
         return (f"The pairs decided: {win.backend} is also the fastest for the pairs alone "
-                f"({pairs_ms(win):.3g} ms); {queries} take {win.trial.queries_ms:.3g} ms of its frame ({share:.0%}).")
+                f"({pairs_ms(win):.3g} ms{setting}); {queries} take {win.trial.queries_ms:.3g} ms of its frame "
+                f"({share:.0%}).")
     return (f"The queries decided: {alone.backend} is the fastest for the pairs alone ({pairs_ms(alone):.3g} ms "
-            f"against {pairs_ms(win):.3g}), but {queries} take it {alone.trial.queries_ms:.3g} ms a frame against "
-            f"{win.trial.queries_ms:.3g} for {win.backend}.")
+            f"against {pairs_ms(win):.3g}{setting}), but {queries} take it {alone.trial.queries_ms:.3g} ms a frame "
+            f"against {win.trial.queries_ms:.3g} for {win.backend}.")
 
 
 def asked_words(sets: tuple[QuerySet, ...]) -> str:

@@ -180,6 +180,9 @@ def test_the_verdict_says_whether_the_pairs_or_the_queries_decided():
     tree = Entry("own.bvh", Trial("own.bvh", {}, "ok", 2.0, 1.9, 2.1, queries_ms=1.7))  # pairs alone 0.3 ms
     text = "\n".join(verdict(rank([tree, sweep]), [tree, sweep], traits, asked))
     assert "The pairs decided: own.bvh is also the fastest for the pairs alone (0.3 ms); 1000 rays" in text
+    tuned = Entry("own.bvh", tree.trial, tuned=True)  # pairs alone measured at the whole frame's setting: said
+    text = "\n".join(verdict(rank([tuned, sweep]), [tuned, sweep], traits, asked))
+    assert "alone (0.3 ms, each at its setting for the whole frame); 1000 rays" in text
     assert "decided" not in "\n".join(verdict(rank([entry("a", 1.0, 0.9, 1.1)]), [entry("a", 1.0, 0.9, 1.1)], traits))
 
 
