@@ -202,6 +202,28 @@ def test_engine_stays_correct_over_the_frames_of_a_recorded_family(name, family)
         backend.close()
 
 
+@pytest.mark.parametrize("name", RELIABLE)
+def test_an_object_still_for_a_second_is_paired_when_moved_onto_a_static_one(name):
+    """Engines put a body that has not moved for a while to sleep (Box2D 3.1 after half a second
+    of its steps), and a sleeping body's new contacts are not looked for: one held still for 70
+    frames, then moved onto a static object, must still come back paired (Box2D 3.1 lost such
+    pairs on a Galton board until its sleeping was turned off)."""
+    backend = make(name)
+    radii, static = np.array([2.0, 2.0, 2.0]), np.array([True, False, False])
+    apart = np.array([[0.0, 0.0], [20.0, 0.0], [40.0, 0.0]])
+    try:
+        backend.reset(apart, radii, static=static)
+        for _ in range(70):
+            backend.update(apart)
+            check_frame(backend, apart, radii)
+        onto = apart.copy()
+        onto[1] = [3.0, 0.0]  # overlapping the static object 0
+        backend.update(onto)
+        assert check_frame(backend, onto, radii).tolist() == [[0, 1]]
+    finally:
+        backend.close()
+
+
 def check_across_frames(name, traj):
     """The backend fed every frame of `traj`: valid pairs, none missed, in each."""
     backend = make(name)
