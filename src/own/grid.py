@@ -698,10 +698,14 @@ def grid_update(positions, radii, order, last_key, xy, p, cell, max_cells, layou
     ids, `xy` must be the slots' centres, which a repair then needs no other copy of.
     Returns (relayout, limit, bucket starts, objects moved, keys they crossed, rows the repair
     moved): the rows are -1 after a counting sort, which leaves the slots in `spare`."""
-    # A sequential pass first, which also brings the centres into cache for the gather.
-    extent = centre_extents(positions, dim)
-    gather_centres(positions, order, xy, dim)
-    relayout = grid_layout(extent, positions.shape[0], p, cell, max_cells, layout, 0.0, dim)
+    if order.shape[0] == positions.shape[0]:
+        # A sequential pass first, which also brings the centres into cache for the gather.
+        extent = centre_extents(positions, dim)
+        gather_centres(positions, order, xy, dim)
+    else:  # statics held apart: the cells span the objects held, not the statics' level
+        gather_centres(positions, order, xy, dim)
+        extent = centre_extents(xy, dim)
+    relayout = grid_layout(extent, order.shape[0], p, cell, max_cells, layout, 0.0, dim)
     limit = small_limit(extent, layout, dim)
     if repair and not relayout:
         moved, shifts, swaps = grid_repair(layout, limit, start, key, slots, dim)
@@ -802,10 +806,11 @@ class CellLayout(SmallScenes, CellQueries, BroadPhase):
         if cell is not None and not (np.isfinite(cell) and cell > 0):
             raise ValueError(f"{self.name}: cell must be a positive finite size, got {shown(cell)}")
 
-    def _start_layout(self, radii, movers=None):
+    def _start_layout(self, radii, movers=None, held=None):
         """The cell size, p and cell cap for these objects, no layout yet, and the one radius of
         them all where the kernels can take it instead of the radii (`specialise`); `movers`: a
-        mask of the objects that size the cells, where statics are among `radii`."""
+        mask of the objects that size the cells, where statics are among `radii`; `held`: how many
+        objects the cells hold, where fewer than n (statics in cells of their own)."""
         if self.params["cell"] is not None:
             self._cell = float(self.params["cell"])
         elif radii.ndim == 2:  # boxes: the movers alive decide (statics are held apart, in cells of their own)
@@ -813,7 +818,7 @@ class CellLayout(SmallScenes, CellQueries, BroadPhase):
         else:
             self._cell = default_cell(radii)
         self._p = int(self.params["p"] or 0)
-        self._max_cells = MAX_CELLS_PER_OBJECT * self.n + CELLS_ROOM[self.dim]
+        self._max_cells = MAX_CELLS_PER_OBJECT * (self.n if held is None else held) + CELLS_ROOM[self.dim]
         self._layout = np.zeros(3 * self.dim)
         self._one = one_radius(radii) if self.params["specialise"] and radii.ndim == 1 else None
         # What stats() says the kernels leave out for this scene.
@@ -870,7 +875,8 @@ class SquareGrid(StaticsQueried, CellLayout):
         self._dim = marker(self.dim)
         self._vector_now = self._vector and self.dim == 2 and self.shape == "balls"
         movers = None if self.static is None else ~self.static
-        self._start_layout(radii, movers if self.alive is None or movers is None else movers & self.alive)
+        self._start_layout(radii, movers if self.alive is None or movers is None else movers & self.alive,
+                           None if movers is None else int(movers.sum()))
         n = self.n
         # Slot arrays (ids, centres, keys, radii), double-buffered: the build reads last frame's
         # while it writes this frame's. Work arrays are kept from frame to frame. Slots hold
