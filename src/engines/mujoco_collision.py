@@ -16,6 +16,12 @@ of the scene is in it from the reset on: one that is not alive is switched off b
 masks (`geom_contype` and `geom_conaffinity` 0, which MuJoCo's filter drops from every pair) and
 switched on when it spawns, a pool of parked objects rather than a recompile.
 
+Rays natively, through `mj_ray` (one call a ray: `mj_multiRay` casts from one origin only), which
+tests every geom against the ray in turn (no tree): its closest hit; every hit of a ray as its
+closest, next closest... hit, each hit geom put in a geom group the ray leaves out before the ray
+is cast again (the parked objects are in that group throughout). MuJoCo has no box or point query
+in its API. A ray starting inside a geom meets its far surface, not 0: `rays_from_inside = False`.
+
 Limits, refused before they are hit: body ids are 16 bits (at most 65533 bodies), and
 `mj_collision` takes about 4 n^2 bytes of the model's arena for its broad phase (measured: 4.01
 to 4.09 n^2 from n = 1024 to 8192: its candidate pairs, n^2 / 2 ints, and as much again to sort
@@ -43,6 +49,12 @@ CONTACT_ROOM = 64 << 20  # the first room for contacts (about 100 000 of them) a
 MEMORY_SHARE = 0.5
 
 
+# The geom group a ray leaves out: the parked objects, and during one ray's every-hit casts, the
+# geoms it already hit (mj_ray's `geomgroup` names the groups a ray sees).
+HIDDEN_GROUP = 5
+SEEN_GROUPS = np.array([1, 1, 1, 1, 1, 0], dtype=np.uint8)
+
+
 def _ignore(message: str) -> None:
     pass
 
@@ -60,6 +72,8 @@ class MujocoSap(BroadPhase):
     lifecycle = "native"
     dims = (2, 3)
     shapes = ("balls", "boxes")
+    answers = ("rays",)
+    rays_from_inside = False
     breaks = ("MuJoCo's sweep and prune runs along the principal axis of all the geoms: spheres that touch exactly "
               "can be lost to rounding there (a pair found alone, missed among 30 others).")
     # Boxes reaching 1e300 from the origin (a sphere of radius 1e300 at (1e300, 1e300)) stopped it
@@ -139,10 +153,36 @@ class MujocoSap(BroadPhase):
         self._update(positions)
 
     def _switch(self, alive: np.ndarray) -> None:
-        """Collision masks on for the objects alive, off for the others (parked)."""
+        """Collision masks on for the objects alive, off for the others (parked), which rays leave out too."""
         on = alive[self._geom_object].astype(self._model.geom_contype.dtype)
         self._model.geom_contype[:] = on
         self._model.geom_conaffinity[:] = on
+        self._model.geom_group[:] = np.where(on, 0, HIDDEN_GROUP)
+
+    def _cast(self, origin, direction, geom) -> float:
+        return mujoco.mj_ray(self._model, self._data, origin, direction, SEEN_GROUPS, True, -1, geom)
+
+    def _closest_hits(self, origins, directions, lengths):
+        hit, t = np.full(len(origins), -1, dtype=np.int64), np.full(len(origins), np.inf)
+        geom = np.zeros(1, dtype=np.int32)
+        for q, (o, u, length) in enumerate(zip(in_3d(origins), in_3d(directions), lengths.tolist())):
+            x = self._cast(o, u, geom)
+            if 0.0 <= x <= length:
+                hit[q], t[q] = self._geom_object[geom[0]], x
+        return hit, t
+
+    def _every_hit(self, origins, directions, lengths):
+        found, geom, group = [], np.zeros(1, dtype=np.int32), self._model.geom_group
+        for q, (o, u, length) in enumerate(zip(in_3d(origins), in_3d(directions), lengths.tolist())):
+            met = []
+            try:
+                while 0.0 <= self._cast(o, u, geom) <= length:
+                    met.append(int(geom[0]))
+                    group[met[-1]] = HIDDEN_GROUP
+            finally:
+                group[met] = 0  # only geoms alive are hit
+            found += [(q, int(k)) for k in self._geom_object[met]]
+        return np.array(found, dtype=np.int64).reshape(-1, 2)
 
     def _update(self, positions):
         self._positions = positions
