@@ -180,9 +180,9 @@ def report(folder: Path, report_to: Path) -> int:
     own_rule = [name for name in sorted(rows.backend.unique())
                 if name in available and not engines.backend_class(name).rays_from_inside]
     if own_rule:
+        rules = dict.fromkeys(engines.backend_class(name).inside_rule for name in own_rule)  # once each, in order
         lines[-2] += (f" {', '.join(own_rule)} follow their engine's own rule for a ray that starts inside an object "
-                      "(Box2D leaves that object out; Bullet hits it at 0 or not, by shape and direction): their rays "
-                      "are checked on those that start outside every object.")
+                      f"({'; '.join(rules)}): their rays are checked on those that start outside every object.")
     if not complete:
         lines += ["**Interrupted run**: these are the rows so far.", ""]
     lines += ["## Summary: the fastest for the pairs and for each set", "",

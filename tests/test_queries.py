@@ -409,3 +409,10 @@ def test_fcl_answers_boxes_and_points_and_refuses_rays_and_far_boxes_in_one_line
     # a box touching object 1's box at x = 4 only (closed intervals), and a point on object 0's circle
     assert backend.query_boxes([[3.0, -0.5]], [[4.0, 0.5]]).tolist() == [[0, 1]]
     assert backend.query_points([[1.0, 0.0]]).tolist() == [[0, 0]]
+
+
+@pytest.mark.parametrize("name", [n for n in engines.names() if not engines.backend_class(n).rays_from_inside])
+def test_an_engine_with_its_own_rule_for_rays_from_inside_says_it_in_words(name):
+    """The reports name each such engine's rule (studies/queries.py): a rule left unsaid reads as none."""
+    cls = engines.backend_class(name)
+    assert "rays" in cls.answers and cls.inside_rule.strip(), f"{name}: rays_from_inside = False without its inside_rule"

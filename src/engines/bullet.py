@@ -54,6 +54,7 @@ class _Bullet(BroadPhase):
     reset_flags = 0
     answers = ("rays", "boxes", "points")
     rays_from_inside = False
+    inside_rule = "Bullet hits it at 0 or not, by shape and direction"
     defaults = {"ray_threads": 0}  # rayTestBatch's numThreads: 0 takes every core
     breaks = ("Bullet stops simulating a non-static object whose AABB extent has a squared length of 1e12 or more "
               "(btCollisionWorld::updateSingleAabb), i.e. spheres of radius ~5.8e5 and up; it cannot create spheres "

@@ -74,6 +74,7 @@ class MujocoSap(BroadPhase):
     shapes = ("balls", "boxes")
     answers = ("rays",)
     rays_from_inside = False
+    inside_rule = "MuJoCo meets its far surface"
     breaks = ("MuJoCo's sweep and prune runs along the principal axis of all the geoms: spheres that touch exactly "
               "can be lost to rounding there (a pair found alone, missed among 30 others).")
     # Boxes reaching 1e300 from the origin (a sphere of radius 1e300 at (1e300, 1e300)) stopped it

@@ -255,8 +255,10 @@ class BroadPhase(ABC):
     # Whether a ray starting inside an object hits it at t = 0, as the interface's rule says. An
     # engine whose ray casts follow their own rule there (Box2D leaves out a shape holding the
     # origin; Bullet hits it at 0 or not by shape and direction) says False: its rays from inside
-    # an object are left out of its checks, in the tests and the studies alike.
+    # an object are left out of its checks, in the tests and the studies alike, and `inside_rule`
+    # says its rule in words for the reports.
     rays_from_inside: ClassVar[bool] = True
+    inside_rule: ClassVar[str] = ""
 
     def __init__(self, **params: Any) -> None:
         unknown = sorted(set(params) - set(self.defaults))
