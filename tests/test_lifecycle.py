@@ -138,6 +138,55 @@ def test_own_grid_never_sorts_or_tests_statics_against_each_other():
     grid.validate()
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("shape", ["balls", "boxes"])
+def test_own_grid_reports_every_pair_when_the_movers_and_the_statics_overflow_one_buffer(dim, shape):
+    # The movers' pairs and their pairs with the statics share one buffer (one compiled call): 60
+    # movers on 60 statics on one spot make 1770 + 3600 pairs, past the first buffer's 1024 rows,
+    # and a frame later some have moved away, so the buffer sized from the first frame is reused.
+    rng = np.random.default_rng(5)
+    positions = rng.uniform(-2.0, 2.0, (120, dim))
+    static = np.arange(120) < 60
+    sizes = {"radii": np.full(120, 3.0)} if shape == "balls" else {"extents": rng.uniform(1.0, 4.0, (120, dim))}
+    grid = engines.create("own.grid")
+    grid.reset(positions, static=static, **sizes)
+    for frame in range(2):
+        expected = box_pairs(positions, next(iter(sizes.values())), static=static)
+        assert len(expected) > 1024 or frame == 1
+        assert is_canonical(grid.pairs(), 120) is None
+        assert sorted(keys(grid.pairs(), 120).tolist()) == keys(expected, 120).tolist()
+        positions = positions.copy()
+        positions[60:90] += 50.0  # half the movers leave the pile
+        grid.update(positions)
+    grid.validate()
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("cell", [None, 3.0])
+def test_own_grid_pairs_movers_with_statics_at_cell_edges_and_past_the_last_cell(dim, cell):
+    # Statics on a lattice as wide as their cells' (a static's diameter plus a mover's), movers
+    # on the cells' edges, on the statics' edges, past the last cell and far out: each tested
+    # against its block of two cells on each axis, or the cells it reaches where it is larger
+    # (with cells of 3 asked for, most movers are: their reach spans up to three cells).
+    rng = np.random.default_rng(11)
+    lattice = np.stack(np.meshgrid(*[np.arange(6) * 7.0] * dim, indexing="ij"), axis=-1).reshape(-1, dim)
+    width = (2.0 + 5.0) * (1.0 + 1e-5)  # the statics' cells by default
+    edges = np.concatenate([np.arange(-1, 8) * width, np.arange(6) * 7.0 + 1.0, np.arange(6) * 7.0 - 3.5])
+    movers = np.concatenate([rng.choice(edges, (400, dim)), rng.uniform(-width, 6 * 7.0 + width, (1000, dim))])
+    movers[:20] += rng.normal(0.0, 1e-9, (20, dim))  # a hair either side of an edge
+    movers[20:24] = 1e12  # far out: its reach, grown by the rounding margin, takes the search
+    positions = np.concatenate([lattice, movers])
+    static = np.arange(len(positions)) < len(lattice)
+    radii = np.where(static, rng.uniform(0.5, 1.0, len(positions)), rng.uniform(0.5, 2.5, len(positions)))
+    radii[-1] = 30.0  # a mover larger than a block: the cells it reaches
+    grid = engines.create("own.grid", **({} if cell is None else {"cell": cell}))
+    grid.reset(positions, radii, static=static)
+    expected = box_pairs(positions, radii, static=static)
+    assert sum(static[expected].any(axis=1)) > 100
+    assert sorted(keys(grid.pairs(), len(positions)).tolist()) == keys(expected, len(positions)).tolist()
+    grid.validate()
+
+
 def test_mujoco_keeps_statics_in_the_world_body_and_parks_objects_that_are_not_alive():
     pytest.importorskip("mujoco")
     positions = np.array([[0.0, 0.0], [5.0, 0.0], [2.0, 0.0], [60.0, 0.0], [62.0, 0.0]])

@@ -101,14 +101,15 @@ def cover_build(positions, sizes, origin, inv, last, strides, cells, dim):
 
 @nb.njit(cache=True)
 def against_static_boxes(q_ids, q_centres, q_sizes, q_end, s_objects, s_positions, s_sizes, start, entries, origin,
-                         inv, last, strides, bounds, dim, buf):
+                         inv, last, strides, bounds, dim, count, buf):
     """Pairs of the movers 0..q_end-1 (object ids, centres, sizes: radii or half-extents) with the
-    static boxes, each once (see the module docstring). Returns (pairs found, pair tests)."""
+    static boxes, each once (see the module docstring), written into buf from row `count` on.
+    Returns (pairs counted, `count` included; pair tests)."""
     d = len(dim)
     qlo, qhi = np.empty(d), np.empty(d)
     lo, hi = np.empty(d, dtype=np.int64), np.empty(d, dtype=np.int64)
     at = np.empty(d, dtype=np.int64)
-    count = tests = 0
+    tests = 0
     for q in range(q_end):
         outside = False
         for a in range(d):
@@ -171,13 +172,15 @@ class StaticBoxCells:
         cells = int(per_axis.prod())
         self._start, self._entries = cover_build(self._positions, self._sizes, self._origin, self._inv, self._last,
                                                  self._strides, cells, self._dim)
+        # What against_static_boxes reads of the statics, after the movers: one tuple, which a
+        # kernel that searches the movers' own structure first hands on (own.grid's).
+        self.args = (self.ids, self._positions, self._sizes, self._start, self._entries, self._origin, self._inv,
+                     self._last, self._strides, self.bounds)
         self._collect = PairCollector()
 
     def pairs_with(self, q_ids: np.ndarray, q_centres: np.ndarray, q_sizes: np.ndarray, q_end: int):
         """Pairs of the movers 0..q_end-1 (object ids, centres, sizes) with the statics, and the tests made."""
-        out, (tests,) = self._collect(against_static_boxes, q_ids, q_centres, q_sizes, q_end, self.ids, self._positions,
-                                      self._sizes, self._start, self._entries, self._origin, self._inv, self._last,
-                                      self._strides, self.bounds, self._dim)
+        out, (tests,) = self._collect(against_static_boxes, q_ids, q_centres, q_sizes, q_end, *self.args, self._dim, 0)
         return out, tests
 
     def validate(self, held: np.ndarray) -> None:

@@ -36,9 +36,9 @@ class StaticsApart(StaticsQueried):
         cells = self._static_cells
         # Built anew at a reset (the scene may be another) or when the statics alive changed.
         if not self._built or cells is None or not np.array_equal(cells.ids, statics):
-            # Static boxes: cells about a mover's size, what a mover's box is looked up by.
-            boxes = self._all_radii.ndim == 2
-            cell = default_cell(self._all_radii[alive & ~self.static]) if boxes else 0.0
+            # Cells from a mover's size: what a mover's box is looked up by (StaticBoxCells), the
+            # block of cells a mover is tested against (StaticCells).
+            cell = default_cell(self._all_radii[alive & ~self.static])
             self._static_cells = static_grid(positions, self._all_radii, statics, cell) if len(statics) else None
         self._alive_ids = np.flatnonzero(alive & ~self.static)
         self.radii, self.n = self._all_radii[self._alive_ids], len(self._alive_ids)
