@@ -174,7 +174,7 @@ def test_own_grid_pairs_movers_with_statics_at_cell_edges_and_past_the_last_cell
     edges = np.concatenate([np.arange(-1, 8) * width, np.arange(6) * 7.0 + 1.0, np.arange(6) * 7.0 - 3.5])
     movers = np.concatenate([rng.choice(edges, (400, dim)), rng.uniform(-width, 6 * 7.0 + width, (1000, dim))])
     movers[:20] += rng.normal(0.0, 1e-9, (20, dim))  # a hair either side of an edge
-    movers[20:24] = 1e12  # far out: its reach, grown by the rounding margin, takes the search
+    movers[20:24] = 1e12  # far out, past the statics' box: skipped before any cell is taken
     positions = np.concatenate([lattice, movers])
     static = np.arange(len(positions)) < len(lattice)
     radii = np.where(static, rng.uniform(0.5, 1.0, len(positions)), rng.uniform(0.5, 2.5, len(positions)))
