@@ -376,8 +376,10 @@ RESIZING = [n for n in OWN_EXACT_BOXES if engines.backend_class(n).resizes]
 # The grids take new extents in place too: own.grid's slots take them (a box grown past a cell
 # changes bucket), and the grids that keep candidates search as own.grid does while boxes turn.
 # own.grid_parallel with parallel_from 0: split over the cores however small, where it takes the plain search too.
-IN_PLACE = [*[(n, {}) for n in [*RESIZING, "own.grid", "own.grid_incremental", "own.grid_parallel"]],
-            ("own.grid_parallel", {"parallel_from": 0})]
+# The sweeps take new bounds from the radii each frame and keep their order (with a skin, sweep anew).
+IN_PLACE = [*[(n, {}) for n in [*RESIZING, "own.grid", "own.grid_incremental", "own.grid_parallel", "own.sap",
+                                "own.sap_incremental", "own.sap_parallel"]],
+            ("own.grid_parallel", {"parallel_from": 0}), ("own.sap", {"skin": 0.5})]
 
 
 @pytest.mark.parametrize(("name", "params"), IN_PLACE)
@@ -442,6 +444,48 @@ def test_static_boxes_are_filed_in_every_cell_they_cover_and_each_pair_found_onc
     expected = box_pairs(positions, extents)
     expected = expected[static[expected[:, 0]] != static[expected[:, 1]]]
     assert len(found) == len(as_set(found)) and as_set(np.sort(found, axis=1)) == as_set(expected)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("static_share", [0.15, 0.85])
+def test_own_grid_pairs_static_boxes_with_movers_each_way_exactly(dim, static_share):
+    """own.grid tests the static boxes against its movers from the statics' side (each static
+    walking the movers' rows of cells) where they are at most as many as the movers (0.15), from
+    the movers' side otherwise (0.85). Both on statics touching the movers' extent exactly from
+    outside it (a mover at the lowest and highest centre, a static's side on its side), statics
+    far away, long walls, movers of one cell and of several, and large movers, every frame exact."""
+    rng = np.random.default_rng(dim + int(100 * static_share))
+    n = 700
+    positions = rng.uniform(0, 200, (n, dim))
+    extents = rng.uniform(0.5, 3, (n, dim))
+    static = rng.random(n) < static_share
+    movers = np.flatnonzero(~static)
+    extents[movers[:len(movers) // 8]] *= 8  # large movers, in the grid's large bucket
+    walls = np.flatnonzero(static)[:10]
+    extents[walls, 0] = rng.uniform(50, 150, len(walls))
+    far = np.flatnonzero(static)[10:20]
+    positions[far] += 1e4
+    # Movers at the extent's ends on every axis, and statics whose sides lie on theirs, outside.
+    low, high, s_low, s_high = movers[-2], movers[-1], *np.flatnonzero(static)[20:22]
+    positions[low], positions[high] = -50.0, 260.0
+    extents[[low, high, s_low, s_high]] = 1.0
+    positions[s_low], positions[s_high] = positions[low] - 2.0, positions[high] + 2.0
+    backend = engines.create("own.grid")
+    backend.reset(positions, extents=extents, static=static)
+    large = []
+    for frame in range(4):
+        expected = box_pairs(positions, extents, None, static)
+        assert {(min(low, s_low), max(low, s_low)), (min(high, s_high), max(high, s_high))} <= as_set(expected)
+        got = backend.pairs()
+        assert as_set(got) == as_set(expected) and len(got) == len(as_set(got)), f"frame {frame}"
+        large.append(backend.stats()["large"])
+        positions, extents = positions.copy(), extents.copy()
+        moving = movers[:-2]
+        positions[moving] += rng.normal(0, 1.5, (len(moving), dim))
+        extents[moving] *= rng.uniform(0.8, 1.25, (len(moving), dim))
+        backend.update(positions, extents=extents)
+    backend.validate()
+    assert max(large) > 0
 
 
 def rotating_boxes(frames: int = 6, n: int = 60, dim: int = 2, seed: int = 0):

@@ -606,17 +606,71 @@ def _scan_statics(centre, r, i, s, e, s_objects, s_centres, s_radii, buf, count,
     return count
 
 
-def against_held_apart(q_ids, q_centres, q_sizes, q_end, statics, dim, count, buf):
-    """The movers 0..q_end-1 against statics held apart, `statics` the tuple they hand on (their
-    `args`): against_statics for balls filed by centre (StaticCells), against_static_boxes for
-    boxes filed in every cell they cover (StaticBoxCells), picked when compiled."""
+def against_held_apart(ids, centres, sradii, start, layout, limit, statics, dim, count, buf):
+    """The movers (the slots before the absent bucket) against the statics held apart, `statics`
+    the tuple they hand on (their `args`), picked when compiled: balls filed by centre
+    (StaticCells) by against_statics; boxes filed in every cell they cover (StaticBoxCells) by
+    statics_over_rows where they are at most as many as the movers, else by against_static_boxes.
+    Returns (pairs counted, `count` included; pair tests)."""
 
 
 @overload(against_held_apart, inline="always")
-def _against_held_apart(q_ids, q_centres, q_sizes, q_end, statics, dim, count, buf):
-    kernel = against_statics if len(statics) == STATIC_BALL_ARGS else against_static_boxes
-    return lambda q_ids, q_centres, q_sizes, q_end, statics, dim, count, buf: kernel(
-        q_ids, q_centres, q_sizes, q_end, *statics, dim, count, buf)
+def _against_held_apart(ids, centres, sradii, start, layout, limit, statics, dim, count, buf):
+    if len(statics) == STATIC_BALL_ARGS:
+        def balls(ids, centres, sradii, start, layout, limit, statics, dim, count, buf):
+            movers = start[key_space(layout, dim)[4] + 1]
+            return against_statics(ids, centres, sradii, movers, *statics, dim, count, buf)
+        return balls
+
+    def boxes(ids, centres, sradii, start, layout, limit, statics, dim, count, buf):
+        large = key_space(layout, dim)[4]
+        first_large, movers = start[large], start[large + 1]
+        if statics[0].shape[0] > movers:
+            return against_static_boxes(ids, centres, sradii, movers, *statics, dim, count, buf)
+        count, tests = statics_over_rows(statics[0], statics[1], statics[2], ids, centres, sradii, start, layout,
+                                         limit, dim, count, buf)
+        count, large_tests = against_static_boxes(ids[first_large:], centres[first_large:], sradii[first_large:],
+                                                  movers - first_large, *statics, dim, count, buf)
+        return count, tests + large_tests
+    return boxes
+
+
+@nb.njit(cache=True, inline="always")
+def statics_over_rows(s_objects, s_positions, s_sizes, ids, centres, sradii, start, layout, limit, dim, count, buf):
+    """Pairs of the static boxes (object ids, centres, half-extents) with the small movers, each
+    static walking the rows of the movers' cells that hold every centre its box can meet: its
+    box grown by the largest small mover's half-size (half the limit; reached_cells). A mover is
+    in one cell, so each pair is found once. Where the statics are few and long (300 walls among
+    3800 movers), 0.04 ms a frame against 0.09 for the movers each looking the statics up
+    (against_static_boxes), whose per-mover cost this pays per static. A static whose grown box
+    misses the layout is skipped: every mover's centre lies inside it (grid_layout). Returns
+    (pairs counted, `count` included; pair tests)."""
+    d = len(dim)
+    space = key_space(layout, dim)
+    extra = 0.5 * max(limit, 0.0)
+    cells, at = np.empty((2, d), dtype=np.int64), np.empty(d, dtype=np.int64)
+    tests = 0
+    for k in range(s_objects.shape[0]):
+        centre, h = row_of(s_positions, k, dim), halves(s_sizes, k, dim)
+        outside = False
+        for a in range(d):
+            reach = h[a] + extra
+            grown = reach + CELL_REACH_PAD * (reach + abs(centre[a]))
+            end = layout[a] + layout[2 * d + a] * layout[d + a]
+            outside |= (centre[a] + grown < layout[a]) | (centre[a] - grown > end)
+        if outside:
+            continue
+        reached_cells(centre, h, extra, space, cells, -1.0, dim)
+        key, width = first_row(cells, at, space, dim), cells[1, 0] - cells[0, 0] + 1
+        box, i = box_of(s_positions, k, sized(s_sizes, k, dim), dim), s_objects[k]
+        for _ in range(rows_in(cells, dim)):
+            s, e = start[key], start[key + width]
+            key = next_row(cells, at, key, space, dim)
+            tests += e - s
+            for b in range(s, e):
+                emit(buf, count, i, ids[b])
+                count += _meets(box, centres, b, sized(sradii, b, dim), dim)
+    return count, tests
 
 
 @nb.njit(cache=True)
@@ -626,8 +680,7 @@ def grid_pairs_then_statics(ids, centres, sradii, radius, skey, start, layout, l
     calls and a concatenation of their pairs took 16.2 us against 12.1 on a board of 1700 pegs
     and 300 balls. Returns (pairs found, pair tests, static tests)."""
     count, tests = grid_pairs(ids, centres, sradii, radius, skey, start, layout, limit, vector, dim, buf)
-    movers = start[key_space(layout, dim)[4] + 1]
-    count, static_tests = against_held_apart(ids, centres, sradii, movers, statics, dim, count, buf)
+    count, static_tests = against_held_apart(ids, centres, sradii, start, layout, limit, statics, dim, count, buf)
     return count, tests, static_tests
 
 

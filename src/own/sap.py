@@ -461,18 +461,32 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         return (self._last_pairs is not None and self._last_pairs <= SPARSE_PAIRS_PER_OBJECT * n
                 and not self._float32_too_coarse)
 
-    def _update(self, positions):
+    def _update(self, positions, reshaped: bool = False):
+        """`reshaped`: the radii changed (_reshape), so the kept pairs are not this frame's."""
         self._positions = positions
         self._since += 1
-        if self._skin > 0.0 and largest_step(positions, self._anchor, self._dim) <= 0.5 * self._skin:
+        if not reshaped and self._skin > 0.0 and largest_step(positions, self._anchor, self._dim) <= 0.5 * self._skin:
             self._stats = {**self._stats, "reused": 1}
             return
         if self._adapts:
             kept = len(self._kept) if self._kept is not None else None
             self._skin = self._skins.next(self._since, kept, self._overlapping, self.n)
-        if self._skin != self._swept_skin:  # the bounds come from the radii each frame, the order stays
+        if reshaped and not np.isfinite(self._largest_radius + 0.5 * self._skin):
+            self._skin = 0.0  # as in _start_sweep
+        if reshaped or self._skin != self._swept_skin:  # the bounds come from the radii each frame, the order stays
             self._set_sweep_radii()
         self._build(positions)
+
+    def _reshape(self, positions):
+        """Boxes took new extents (bodies rotated): the bounds come from the radii each frame and
+        the order stays, so the frame is an update on the new sizes that sorts and sweeps (it was
+        built anew as at a reset). Objects that came or went: built anew."""
+        if len(self.spawned) or len(self.removed):
+            super()._reshape(positions)
+            return
+        positions = self._held_with_new_extents(positions)
+        self._largest_radius = float(self.radii.max()) if len(self.radii) else 0.0
+        self._update(positions, reshaped=True)
 
     def _build(self, positions):
         """Sort for this frame's sweep of the boxes grown by half the skin, whose pairs are kept."""

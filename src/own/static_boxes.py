@@ -59,6 +59,16 @@ def _covered(positions, sizes, k, origin, inv, last, lo, hi, at, d):
 
 
 @nb.njit(cache=True, inline="always")
+def _meets_box(qlo, qhi, positions, sizes, k, d):
+    """Whether the box of row k meets the box qlo..qhi (closed intervals)."""
+    meets = True
+    for a in range(d):
+        h = half_of(sizes, k, a)
+        meets &= (positions[k, a] - h <= qhi[a]) & (qlo[a] <= positions[k, a] + h)
+    return meets
+
+
+@nb.njit(cache=True, inline="always")
 def meets_here(qlo, qhi, positions, sizes, k, at, origin, inv, last, d):
     """Whether the box of row k meets the box qlo..qhi, and this cell `at` holds the low corner of
     their intersection (the one cell the pair is reported from: see the module docstring)."""
@@ -103,7 +113,11 @@ def cover_build(positions, sizes, origin, inv, last, strides, cells, dim):
 def against_static_boxes(q_ids, q_centres, q_sizes, q_end, s_objects, s_positions, s_sizes, start, entries, origin,
                          inv, last, strides, bounds, dim, count, buf):
     """Pairs of the movers 0..q_end-1 (object ids, centres, sizes: radii or half-extents) with the
-    static boxes, each once (see the module docstring), written into buf from row `count` on.
+    static boxes, each once (see the module docstring), written into buf from row `count` on. A
+    mover within one cell (most, with cells of at least a mover's size) reports every static it
+    meets there: the low corner of an intersection lies in the mover's box, so in its one cell,
+    and the rule's cell indices are left out (on the walls at n = 4096, 0.16 -> 0.09 ms a frame).
+    Every candidate is written and only a hit kept, as in the grid's scans (branch-free).
     Returns (pairs counted, `count` included; pair tests)."""
     d = len(dim)
     qlo, qhi = np.empty(d), np.empty(d)
@@ -118,19 +132,28 @@ def against_static_boxes(q_ids, q_centres, q_sizes, q_end, s_objects, s_position
             outside |= (qhi[a] < bounds[a]) | (qlo[a] > bounds[d + a])
         if outside:
             continue
+        single = True
         for a in range(d):
             lo[a] = cell_of(qlo[a], origin[a], inv[a], last[a])
             hi[a] = cell_of(qhi[a], origin[a], inv[a], last[a])
             at[a] = lo[a]
+            single &= lo[a] == hi[a]
         i = q_ids[q]
+        if single:  # one cell: every pair met is reported from it (see the docstring), no rule to test
+            c = _key(at, strides, d)
+            tests += start[c + 1] - start[c]
+            for e in range(start[c], start[c + 1]):
+                k = entries[e]
+                emit(buf, count, i, s_objects[k])
+                count += _meets_box(qlo, qhi, s_positions, s_sizes, k, d)
+            continue
         while True:
             c = _key(at, strides, d)
             tests += start[c + 1] - start[c]
             for e in range(start[c], start[c + 1]):
                 k = entries[e]
-                if meets_here(qlo, qhi, s_positions, s_sizes, k, at, origin, inv, last, d):
-                    emit(buf, count, i, s_objects[k])
-                    count += 1
+                emit(buf, count, i, s_objects[k])
+                count += meets_here(qlo, qhi, s_positions, s_sizes, k, at, origin, inv, last, d)
             if not _advance(at, lo, hi, d):
                 break
     return count, tests
