@@ -168,6 +168,22 @@ def test_bad_extents_are_one_line_naming_the_problem(extents, words):
         grid.reset(np.zeros((5, 2)), extents=extents)
 
 
+@pytest.mark.parametrize("extents, words", [
+    (np.ones((5, 3)), "extents must have shape (5, 2)"),
+    (np.ones(5), "extents must have shape (5, 2)"),
+    (np.r_[np.ones((2, 2)), [[1.0, -1e-300]], np.ones((2, 2))], "extents row 2 is negative"),
+    (np.r_[np.ones((4, 2)), [[np.nan, 1.0]]], "extents row 4 is not finite"),
+    (np.r_[np.ones((3, 2)), [[1.0, np.inf]], np.ones((1, 2))], "extents row 3 is not finite"),
+    (np.r_[np.ones((3, 2)), [[1.0, -np.inf]], np.ones((1, 2))], "extents row 3 is negative"),
+])
+def test_bad_extents_in_an_update_are_one_line_naming_the_problem(extents, words):
+    """A frame's extents go through one compiled pass (not check_extents): it refuses the same."""
+    grid = engines.create("own.grid")
+    grid.reset(np.zeros((5, 2)), extents=np.ones((5, 2)), static=np.array([True, False, False, False, True]))
+    with pytest.raises(ValueError, match=re.escape(words)):
+        grid.update(np.zeros((5, 2)), extents=extents)
+
+
 def test_radii_or_extents_one_of_them_and_extents_only_for_boxes():
     grid = engines.create("own.grid")
     with pytest.raises(ValueError, match="not both"):
@@ -179,13 +195,20 @@ def test_radii_or_extents_one_of_them_and_extents_only_for_boxes():
         grid.update(np.zeros((3, 2)), extents=np.ones((3, 2)))
 
 
-def test_a_static_box_that_changes_its_extents_is_refused():
+@pytest.mark.parametrize("static, changed", [
+    ([True, False, False, False], 0),
+    ([True, True, False, False], 1),  # the statics one block of rows
+    ([False, True, False, True], 3),  # not one block
+])
+def test_a_static_box_that_changes_its_extents_is_refused(static, changed):
     grid = engines.create("own.grid")
-    static = np.array([True, False, False])
-    grid.reset(np.zeros((3, 2)), extents=np.ones((3, 2)), static=static)
-    grid.update(np.zeros((3, 2)), extents=np.r_[[[1.0, 1.0]], 2 * np.ones((2, 2))])  # movers may
-    with pytest.raises(ValueError, match="object 0 is static but its extents changed"):
-        grid.update(np.zeros((3, 2)), extents=2 * np.ones((3, 2)))
+    static = np.array(static)
+    grid.reset(np.zeros((4, 2)), extents=np.ones((4, 2)), static=static)
+    moved = np.where(static[:, None], 1.0, 2.0) * np.ones((4, 2))
+    grid.update(np.zeros((4, 2)), extents=moved)  # movers may
+    moved[changed, 1] = 1.5
+    with pytest.raises(ValueError, match=f"object {changed} is static but its extents changed"):
+        grid.update(np.zeros((4, 2)), extents=moved)
 
 
 @pytest.mark.parametrize("name", ["own.grid", "own.sap", "chipmunk.bbtree"])

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Literal
 import numpy as np
 import numpy.typing as npt
 
-from .checks import check_extents, check_mask, check_positions, check_radii, first_moved, shown
+from .checks import changed_extents, check_extents, check_mask, check_positions, check_radii, first_moved, shown
 from .queries import Query, by_query, check_points, check_query_boxes, check_rays, unanswered
 
 if TYPE_CHECKING:
@@ -354,17 +354,17 @@ class BroadPhase(ABC):
         """Take this frame's half-extents of boxes; whether they differ from the last ones."""
         if self.shape != "boxes":
             raise ValueError(f"{self.name}: extents given to update, but it was reset with radii (circles, spheres)")
-        sizes = check_extents(extents, self.objects, self.dim)
-        if np.array_equal(sizes, self._all_radii):
+        ids = self._static_home[0] if self._static_home is not None else NO_IDS
+        # A new array where they changed (ours: the caller may change its array in place for the
+        # next frame); backends compare it with the `radii` they hold.
+        sizes, static = changed_extents(extents, self._all_radii, ids)
+        if static >= 0:
+            k = int(ids[static])
+            raise ValueError(f"{self.name}: object {k} is static but its extents changed, from "
+                             f"{self._all_radii[k].tolist()} to {sizes[k].tolist()}: statics never change")
+        if sizes is self._all_radii:
             return False
-        if self._static_home is not None:
-            ids = self._static_home[0]
-            differs = (sizes[ids] != self._all_radii[ids]).any(axis=1)
-            if differs.any():
-                k = int(ids[np.flatnonzero(differs)[0]])
-                raise ValueError(f"{self.name}: object {k} is static but its extents changed, from "
-                                 f"{self._all_radii[k].tolist()} to {sizes[k].tolist()}: statics never change")
-        self._all_radii = sizes.copy()  # ours: the caller may change its array in place for the next frame
+        self._all_radii = sizes
         return True
 
     def _reshape(self, positions: np.ndarray) -> None:
