@@ -153,8 +153,11 @@ def ms_without(backend: str, traj: Trajectory, seconds: float, used: bool, **par
     """The backend's time with `params` turning off a part it `used` on this scene; "-" where it
     did not use it. The parts: kernels specialised for the scene (its counters name a part it
     left out; specialise=False runs the general ones) and the vector scan (counter `vector`;
-    vector=False scans one slot at a time, own/compress.py)."""
-    return f"{tight_loop(backend, traj, seconds, **params)[0]:.4f}" if used else "-"
+    vector=False scans one slot at a time, own/compress.py). Also "-" where the backend has no
+    such parameter: own.grid_incremental counts the vector scans of the own.grid search it may
+    hand a frame to, but takes no `vector` of its own."""
+    takes = set(params) <= set(engines.backend_class(backend).defaults)
+    return f"{tight_loop(backend, traj, seconds, **params)[0]:.4f}" if used and takes else "-"
 
 
 def bench_rows(dim: int, every_core: bool) -> dict[str, list[str]]:

@@ -191,3 +191,14 @@ def test_scale_keeps_the_spheres_section_of_its_report_and_replaces_it_from_a_3d
     assert kept_section(report) == section  # what a 2D run's report carries over
     report.write_text(flat)
     assert kept_section(report) == "" and kept_section(tmp_path / "none.md") == ""
+
+
+def test_bench_times_without_a_part_only_where_the_backend_takes_that_parameter():
+    """own.grid_incremental counts the vector scans of the own.grid search it hands frames to,
+    but takes no `vector`: its scalar time is "-", not an error that ended the bench at 2^17."""
+    from studies import bench
+
+    traj = bench._trajectory("uniform", 256, 2)
+    assert bench.ms_without("own.grid_incremental", traj, 0.0, True, vector=False) == "-"
+    assert float(bench.ms_without("own.grid", traj, 0.0, True, vector=False)) > 0
+    assert bench.ms_without("own.grid", traj, 0.0, False, vector=False) == "-"
