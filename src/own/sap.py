@@ -401,8 +401,6 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
 
     def _start_sweep(self, positions):
         """The sweep's state, built for this skin's grown boxes, and this frame's sort."""
-        if not np.isfinite(self._largest_radius + 0.5 * self._skin):
-            self._skin = 0.0  # radii near the largest double leave no room for a skin (exact without one)
         self._set_sweep_radii()
         n, d = self.n, self.dim
         # Where a repair gave up (everything moving: a tumbler, a drum), the next ones are likely
@@ -445,6 +443,8 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
 
     def _set_sweep_radii(self):
         """The radii of the boxes swept (grown by half the skin), and the columns' side (3D)."""
+        if not np.isfinite(self._largest_radius + 0.5 * self._skin):
+            self._skin = 0.0  # radii near the largest double leave no room for a skin (exact without one)
         self._swept_skin = self._skin
         self._sweep_radii = self.radii + 0.5 * self._skin if self._skin > 0.0 else self.radii
         grown = self._largest_radius + 0.5 * self._skin
@@ -471,8 +471,6 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         if self._adapts:
             kept = len(self._kept) if self._kept is not None else None
             self._skin = self._skins.next(self._since, kept, self._overlapping, self.n)
-        if reshaped and not np.isfinite(self._largest_radius + 0.5 * self._skin):
-            self._skin = 0.0  # as in _start_sweep
         if reshaped or self._skin != self._swept_skin:  # the bounds come from the radii each frame, the order stays
             self._set_sweep_radii()
         self._build(positions)
