@@ -323,6 +323,50 @@ def test_the_grids_and_sweeps_take_many_large_boxes_apart(name, dim):
         assert backend.stats()["large"] >= COVER_FROM
 
 
+@pytest.mark.parametrize("vector", [True, False])
+@settings(max_examples=40, deadline=None)
+@given(data=st.data())
+def test_own_grid_scans_boxes_eight_at_a_time_or_one_at_a_time_exactly(vector, data):
+    """own.grid's vector scan takes the boxes' half-extents by column (own/compress.py): forced
+    (on any CPU) and off, exact on random and adversarial boxes, with statics and objects not
+    alive, before and after every box takes new extents (the slots gather them in place)."""
+    positions, extents = data.draw(box_scenes(dim=2))
+    n = len(positions)
+    rng = np.random.default_rng(n)
+    static, alive = rng.random(n) < 0.3, rng.random(n) < 0.8
+    grid = engines.create("own.grid", vector=vector)
+    grid.small_scene_n = 0  # the structure, however small the scene
+    grid.reset(positions, extents=extents, static=static, alive=alive)
+    turned = np.where(static[:, None], extents, extents[:, ::-1])  # a quarter turn of every mover
+    for sizes in (extents, turned):
+        grid.update(positions, extents=sizes)
+        got = grid.pairs()
+        assert len(as_set(got)) == len(got) and as_set(got) == as_set(box_pairs(positions, sizes, alive, static))
+        grid.validate()
+    assert grid.stats()["vector"] == int(vector)
+
+
+@pytest.mark.parametrize("vector", [True, False])
+def test_own_grid_scans_long_runs_of_boxes_eight_at_a_time_exactly(vector):
+    """Dozens of boxes a cell (runs of many blocks of 8, and a last block part full), boxes large
+    and small, turning each frame: the vector scan, and the scalar one, against brute force (the
+    reference takes own.grid past BRUTE_FORCE_LIMIT objects)."""
+    rng = np.random.default_rng(5)
+    n = BRUTE_FORCE_LIMIT
+    positions = rng.uniform(0, 250, (n, 2))
+    extents = rng.uniform(1, 4, (n, 2)) * rng.uniform(1, 6, (n, 1))
+    grid = engines.create("own.grid", vector=vector)
+    grid.reset(positions, extents=extents)
+    for frame in range(3):
+        positions = positions + rng.normal(0, 1, (n, 2))
+        extents = extents * rng.uniform(0.9, 1.1, (n, 2))
+        grid.update(positions, extents=extents)
+        got = grid.pairs()
+        assert len(as_set(got)) == len(got) and as_set(got) == as_set(box_pairs(positions, extents)), f"frame {frame}"
+        grid.validate()
+    assert grid.stats()["tests"] > 16 * n and grid.stats()["large"] > 0 and grid.stats()["vector"] == int(vector)
+
+
 RELIABLE_ON_BOXES = [n for n in BOX_BACKENDS if n not in UNRELIABLE_ON_BOXES]
 
 

@@ -166,7 +166,7 @@ def test_our_grid_takes_p_cell_statics_and_large_spheres_and_refuses_the_vector_
         grid.validate()
         assert grid.stats()["large"] >= 1 and grid.stats()["statics"] == static.sum()
         np.testing.assert_array_equal(np.sort(keys(grid.pairs(), 800)), keys(expected, 800))
-    with pytest.raises(ValueError, match=r"^own.grid: vector scans circles only"):
+    with pytest.raises(ValueError, match=r"^own.grid: vector scans in 2D only"):
         engines.create("own.grid", vector=True).reset(positions, radii)
 
 

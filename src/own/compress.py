@@ -1,4 +1,4 @@
-"""A scan of one circle against 8 slots per step, its hits compressed into the pair buffer.
+"""A scan of one circle or box against 8 slots per step, its hits compressed into the pair buffer.
 
 Where pairs are many (a clustered scene makes millions a frame), the scalar branch-free scan is
 bound by its instruction count: per test a store of the pair, the min and max that order it, and
@@ -72,15 +72,16 @@ def _contiguous(ty, ndim, dtype, layouts="C"):
 def scan_block(typingctx, centres, radius, ids, b, e, box, i, buf, count):
     """Test the box (x0, x1, y0, y1) of object i against slots b .. min(b + LANES, e) - 1 of
     `centres` (n, 2) stored in columns (x of every slot contiguous, as order="F" stores them: the
-    caller checks) with `radius` (one float, or per slot), and write the pairs (min, max) of
+    caller checks) with `radius` (one float, one per slot, or a box's half-extents (n, 2) per slot,
+    stored in columns as the centres are), and write the pairs (min, max) of
     the hits from row `count` of `buf`; returns the new count. Overlap is tested as everywhere
     (closed intervals of x - r, x + r), as two compares per axis: bx0 <= ax1 and ax0 <= bx1 is
     max(ax0, bx0) <= min(ax1, bx1) for boxes of non-negative radii."""
-    one = isinstance(radius, types.Float)
+    one, boxes = isinstance(radius, types.Float), _contiguous(radius, 2, types.float64, "F")
     if not (_contiguous(centres, 2, types.float64, "CFA") and _contiguous(ids, 1, types.int64)
-            and _contiguous(buf, 2, types.int64) and (one or _contiguous(radius, 1, types.float64))):
+            and _contiguous(buf, 2, types.int64) and (one or boxes or _contiguous(radius, 1, types.float64))):
         raise TypeError("scan_block: float64 centres (n, 2), C-contiguous int64 ids and buf (rows, 2), "
-                        "and a float64 radius or radii")
+                        "and a float64 radius, radii, or half-extents (n, 2) stored in columns")
     sig = types.int64(centres, radius, ids, types.int64, types.int64, types.UniTuple(types.float64, 4),
                       types.int64, buf, types.int64)
 
@@ -99,13 +100,18 @@ def scan_block(typingctx, centres, radius, ids, b, e, box, i, buf, count):
         xs = _masked_load(builder, builder.gep(cdata, [b]), valid, _F64)
         ys = _masked_load(builder, builder.gep(cdata, [builder.add(b, y_at)]), valid, _F64)
         if one:
-            r = _splat(builder, radius_v, _F64)
+            rx = ry = _splat(builder, radius_v, _F64)
+        elif boxes:  # half-extents by column, as the centres: x's, then y's one column stride on
+            sizes = context.make_array(signature.args[1])(context, builder, radius_v)
+            ry_at = builder.sdiv(builder.extract_value(sizes.strides, 1), ir.Constant(_I64, 8))
+            rx = _masked_load(builder, builder.gep(sizes.data, [b]), valid, _F64)
+            ry = _masked_load(builder, builder.gep(sizes.data, [builder.add(b, ry_at)]), valid, _F64)
         else:
             rdata = context.make_array(signature.args[1])(context, builder, radius_v).data
-            r = _masked_load(builder, builder.gep(rdata, [b]), valid, _F64)
+            rx = ry = _masked_load(builder, builder.gep(rdata, [b]), valid, _F64)
         hit = valid
-        for lo, hi in ((builder.fsub(xs, r), ax1), (ax0, builder.fadd(xs, r)),
-                       (builder.fsub(ys, r), ay1), (ay0, builder.fadd(ys, r))):
+        for lo, hi in ((builder.fsub(xs, rx), ax1), (ax0, builder.fadd(xs, rx)),
+                       (builder.fsub(ys, ry), ay1), (ay0, builder.fadd(ys, ry))):
             hit = builder.and_(hit, builder.fcmp_ordered("<=", lo, hi))
         # The pairs (min, max), interleaved as the buffer's rows are.
         js, iv = _masked_load(builder, builder.gep(idata, [b]), valid, _I64), _splat(builder, i, _I64)
