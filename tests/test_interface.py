@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import engines
 from interface.pairs import canonical, is_canonical
@@ -101,6 +103,16 @@ def test_canonical_orders_and_deduplicates():
     assert is_canonical(got, 6) is None
     assert "twice" in is_canonical(np.array([[0, 1], [0, 1]]), 2)
     assert "i >= j" in is_canonical(np.array([[1, 0]]), 2)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 2**40), st.integers(0, 2**40)), max_size=60))
+def test_canonical_is_the_sorted_set_of_pairs(rows):
+    # Engines' pairs go through it (ids up to 2^40: its keys must not overflow or collide).
+    expected = sorted({(min(a, b), max(a, b)) for a, b in rows if a != b})
+    got = canonical([a for a, _ in rows], [b for _, b in rows])
+    assert got.dtype == np.int64 and got.shape == (len(expected), 2)
+    assert [tuple(r) for r in got.tolist()] == expected
 
 
 def test_narrow_phase_counts_touching_circles():

@@ -135,7 +135,7 @@ class _Chipmunk(BroadPhase):
             if len(self.spawned):
                 self._space.add(*[part for i in self.spawned.tolist() for part in self._items[i]])
             self._find_visit_order()
-        flat = (positions if self._in_order else positions[self._visit]).ravel().copy()
+        flat = (positions if self._in_order else np.take(positions, self._visit, axis=0)).ravel().copy()
         self._positions.set_float_buf(flat)
         batch.set_space_bodies(self._space, batch.BodyFields.POSITION, self._positions)
 

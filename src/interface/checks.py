@@ -130,51 +130,33 @@ def check_extents(extents: object, n: int, dim: int) -> FloatArray:
     return np.ascontiguousarray(arr)
 
 
-def changed_extents(extents: object, before: FloatArray, static_ids: np.ndarray) -> tuple[FloatArray, int]:
+def changed_extents(extents: object, before: FloatArray) -> FloatArray:
     """A frame's half-extents of boxes, checked as `check_extents` does, against the last frame's
-    `before`: (a contiguous copy, or `before` itself where nothing changed; the first index into
-    `static_ids` whose row changed, or -1). Every frame of turning boxes passes here: one compiled
-    pass checks, compares and finds a changed static (4096 boxes, 286 of them static: 37 us in
-    four numpy passes before)."""
+    `before`: a contiguous copy, or `before` itself where nothing changed. Every frame of turning
+    boxes passes here: one compiled pass checks and compares (4096 boxes: 37 us in four numpy
+    passes with the statics' check before, 9.5 now)."""
     arr = real_array(extents, "extents")
     if arr.shape != before.shape:
-        return check_extents(arr, *before.shape), -1  # raises, naming the shape
+        check_extents(arr, *before.shape)  # raises, naming the shape
     arr = np.ascontiguousarray(arr)
-    valid, differs, static = _extents_scan(arr, before, static_ids)
+    valid, differs = _extents_scan(arr, before)
     if not valid:
         check_extents(arr, *before.shape)  # raises, naming the row
-    return (arr.copy() if differs else before), static
+    return arr.copy() if differs else before
 
 
 @nb.njit(cache=True, fastmath={"reassoc"})
-def _extents_scan(extents: FloatArray, before: FloatArray, static_ids: np.ndarray) -> tuple[bool, bool, int]:
-    """(every half-extent finite and >= 0; any differs from `before`; the first of `static_ids`
-    whose row differs, or -1): one flat pass of sums in any order, which the compiler vectorises
-    (3.3 us at 8192 values, against 6.3 for the same tests as comparisons), and the statics
-    searched only where something changed and the block of statics' rows (as scenes number them)
-    differs."""
+def _extents_scan(extents: FloatArray, before: FloatArray) -> tuple[bool, bool]:
+    """(every half-extent finite and >= 0; any differs from `before`): one flat pass of sums in
+    any order, which the compiler vectorises (3.3 us at 8192 values, against 6.3 for the same
+    tests as comparisons)."""
     flat, last = extents.reshape(extents.size), before.reshape(before.size)
     invalid, change = 0.0, 0.0
     for t in range(flat.shape[0]):
         x = flat[t]
         invalid += x - abs(x)  # 0 for a valid value; < 0 for a negative one, NaN for NaN and infinity
         change += abs(x - last[t])  # > 0 (or infinite) once one value differs; `before` is valid
-    valid, differs = invalid == 0.0, change != 0.0
-    m = static_ids.shape[0]
-    if not (valid and differs and m):
-        return valid, differs, -1
-    d = extents.shape[1]
-    if static_ids[m - 1] - static_ids[0] + 1 == m:
-        block = False
-        for t in range(static_ids[0] * d, (static_ids[0] + m) * d):
-            block |= flat[t] != last[t]
-        if not block:
-            return valid, differs, -1
-    for a in range(m):
-        for k in range(d):
-            if extents[static_ids[a], k] != before[static_ids[a], k]:
-                return valid, differs, a
-    return valid, differs, -1
+    return invalid == 0.0, change != 0.0
 
 
 def check_mask(mask: object, shape: tuple[int, ...], what: str) -> np.ndarray | None:

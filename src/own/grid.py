@@ -152,14 +152,15 @@ def cell_key(centres, k, r, limit, space, dim):
 
 
 @nb.njit(cache=True, inline="always")
-def gather_centres(positions, order, centres, dim):
-    """Centres in `order`: the only scattered reads, in a loop so short that the CPU keeps many
-    cache misses in flight (3x faster at n = 2^20 than computing keys in the same loop; taking
-    the extent in it too, a chain of min and max through every load, made it 1.5x slower)."""
+def gather_rows(rows, order, into, dim):
+    """Rows of `rows` (centres, or boxes' half-extents) in `order`, into `into` (of any layout):
+    the only scattered reads, in a loop so short that the CPU keeps many cache misses in flight
+    (3x faster at n = 2^20 than computing keys in the same loop; taking the extent in it too, a
+    chain of min and max through every load, made it 1.5x slower)."""
     for k in range(order.shape[0]):
         i = order[k]
         for a in range(len(dim)):
-            centres[k, a] = positions[i, a]
+            into[k, a] = rows[i, a]
 
 
 @nb.njit(cache=True)
@@ -470,18 +471,6 @@ def grid_pairs(ids, centres, sradii, radius, skey, start, layout, limit, vector,
     return large_against_large(centres, sradii, ids, first_large, end_large, buf, count, tests, dim)
 
 
-@nb.njit(cache=True, inline="always")
-def covered_cells(centres, k, sizes, extra, space, cells, dim):
-    """Into `cells` (2, d): the first and last cell on each axis (inclusive) that the box of row k
-    (`centres`, `sizes`) grown by `extra` on each side covers, plus one cell on each side, which
-    absorbs the rounding of the cell index."""
-    origin, inverse, last = space[0], space[1], space[2]
-    for a in range(len(dim)):
-        x, reach = centres[k, a], half_of(sizes, k, a) + extra
-        cells[0, a] = max(cell_of(x - reach, origin[a], inverse[a], last[a]) - 1, 0)
-        cells[1, a] = min(cell_of(x + reach, origin[a], inverse[a], last[a]) + 1, int(last[a]))
-
-
 # The reach of a mover's box, grown by this share of itself and of its centre's distance from the
 # origin before its cells are taken: far above the rounding of x - reach and x + reach and of the
 # box tests (a few ulps), far below a cell.
@@ -497,7 +486,8 @@ BLOCK_SHARE = 0.5 * (1.0 - 1e-6)
 def reached_cells(centre, half, extra, space, cells, block, dim):
     """Into `cells` (2, d): the first and last cell on each axis (inclusive) that hold every centre
     within half[a] + extra of `centre` (tuples) along each axis a: cell_of is monotone, so the cells of the
-    ends of a slightly grown reach bound them, with no spare cell on each side (covered_cells's):
+    ends of a slightly grown reach bound them, with no spare cell on each side (as a box's cells
+    padded by one against the rounding of the cell index had):
     on a Galton board, 1375 static tests a frame instead of 3910. Where every grown reach is at
     most `block`, under half a cell, the two cells from the lower end on each axis instead (their
     last may be one past the layout's: the padded key space's empty cells)."""
@@ -515,7 +505,7 @@ def reached_cells(centre, half, extra, space, cells, block, dim):
 
 @nb.njit(cache=True, inline="always")
 def first_row(cells, at, space, dim):
-    """The key of the first cell of the box of cells `cells` (covered_cells), and `at` (d) set to
+    """The key of the first cell of the box of cells `cells` (reached_cells), and `at` (d) set to
     its cell on each axis past x: the start of a walk over the box's rows (runs along x)."""
     strides = space[3]
     key = 1 + cells[0, 0]
@@ -541,7 +531,7 @@ def next_row(cells, at, key, space, dim):
 
 @nb.njit(cache=True, inline="always")
 def rows_in(cells, dim):
-    """Rows of cells (runs along x) in the box of cells `cells` (covered_cells)."""
+    """Rows of cells (runs along x) in the box of cells `cells` (reached_cells)."""
     rows = 1
     for a in range(1, len(dim)):
         rows *= cells[1, a] - cells[0, a] + 1
@@ -811,9 +801,9 @@ def grid_update(positions, radii, order, last_key, xy, p, cell, max_cells, layou
     if order.shape[0] == positions.shape[0]:
         # A sequential pass first, which also brings the centres into cache for the gather.
         extent = centre_extents(positions, dim)
-        gather_centres(positions, order, xy, dim)
+        gather_rows(positions, order, xy, dim)
     else:  # statics held apart: the cells span the objects held, not the statics' level
-        gather_centres(positions, order, xy, dim)
+        gather_rows(positions, order, xy, dim)
         extent = centre_extents(xy, dim)
     relayout = grid_layout(extent, order.shape[0], p, cell, max_cells, layout, 0.0, dim)
     limit = small_limit(extent, layout, dim)
@@ -1043,7 +1033,7 @@ class SquareGrid(StaticsQueried, CellLayout):
         self.radii = self._all_radii
         self._live_radii = live_sizes(self.radii, self.alive)
         ids, _, _, sradii = self._slots
-        gather_centres(self._live_radii, ids, sradii, self._dim)  # in place, by column (np.take there: 3.5x slower)
+        gather_rows(self._live_radii, ids, sradii, self._dim)  # in place, by column (np.take there: 3.5x slower)
         self._update(positions)
 
     def _build_statics(self, positions: np.ndarray) -> None:

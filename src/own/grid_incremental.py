@@ -28,11 +28,11 @@ from numba.extending import overload
 
 from interface.base import size_keyword
 
-from .common import PairCollector, centre_extents, copy_size, emit, widest_half
+from .common import PairCollector, centre_extents, copy_size, emit, halves, row_of, widest_half
 from .dimension import marker
-from .grid import (CellLayout, UniformGrid, above, cell_key, cell_key_origin, cell_keys, covered_cells, first_row,
-                   gather_centres, grid_layout, key_space, key_strides, large_against_large, large_key, next_row,
-                   rows_in, small_limit)
+from .grid import (CellLayout, UniformGrid, above, cell_key, cell_key_origin, cell_keys, first_row,
+                   gather_rows, grid_layout, key_space, key_strides, large_against_large, large_key, next_row,
+                   reached_cells, rows_in, small_limit)
 from .grid_query import listed_cells
 from .kept_lists import (CANDIDATE_RANK, LAYOUT_SLACK_CELLS, REBUILD_MOVERS_DIVISOR, RENEW_AFTER_MOVES_PER_OBJECT,
                          add_candidate, boxes_overlap, drop_moved, link_runs, move, new_state, unpack)
@@ -100,7 +100,7 @@ def incremental_rebuild(positions, radii, layout, limit, state, head, cand, dim)
         c = okey[i]
         perm[head[c]] = i
         head[c] += 1
-    gather_centres(positions, perm, xy, dim)
+    gather_rows(positions, perm, xy, dim)
     for a in range(n):
         rank[perm[a]] = a
         copy_size(sr, a, radii, perm[a], dim)
@@ -279,8 +279,8 @@ def large_pairs(state, head, layout, limit, buf, count, tests, dim):
         return count, tests
     reach = 0.5 * max(limit, 0.0)
     cells, at = np.empty((2, len(dim)), dtype=np.int64), np.empty(len(dim), dtype=np.int64)
-    for a in range(first_large, n):  # against the small objects in the cells they cover
-        covered_cells(xy, a, sr, reach, space, cells, dim)
+    for a in range(first_large, n):  # against the small objects in the cells that hold the centres they reach
+        reached_cells(row_of(xy, a, dim), halves(sr, a, dim), reach, space, cells, -1.0, dim)
         key, width = first_row(cells, at, space, dim), cells[1, 0] - cells[0, 0] + 1
         for _ in range(rows_in(cells, dim)):
             s, e = key, key + width
