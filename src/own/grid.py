@@ -486,9 +486,9 @@ BLOCK_SHARE = 0.5 * (1.0 - 1e-6)
 def reached_cells(centre, half, extra, space, cells, block, dim):
     """Into `cells` (2, d): the first and last cell on each axis (inclusive) that hold every centre
     within half[a] + extra of `centre` (tuples) along each axis a: cell_of is monotone, so the cells of the
-    ends of a slightly grown reach bound them, with no spare cell on each side (as a box's cells
-    padded by one against the rounding of the cell index had):
-    on a Galton board, 1375 static tests a frame instead of 3910. Where every grown reach is at
+    ends of a slightly grown reach bound them. Padding the reach, not the cells, spares a cell on
+    each side against the rounding of the cell index: on a Galton board, 1375 static tests a frame
+    instead of 3910. Where every grown reach is at
     most `block`, under half a cell, the two cells from the lower end on each axis instead (their
     last may be one past the layout's: the padded key space's empty cells)."""
     origin, inverse, last = space[0], space[1], space[2]

@@ -40,10 +40,7 @@ class StaticsApart(StaticsQueried):
             # block of cells a mover is tested against (StaticCells).
             cell = default_cell(self._all_radii[alive & ~self.static])
             self._static_cells = static_grid(positions, self._all_radii, statics, cell) if len(statics) else None
-        self._alive_ids = np.flatnonzero(alive & ~self.static)
-        self.radii, self.n = np.take(self._all_radii, self._alive_ids, axis=0), len(self._alive_ids)
-        self._held_positions = np.take(positions, self._alive_ids, axis=0)  # faster than fancy indexing
-        self._reset(self._held_positions, self.radii)
+        self._hold(np.flatnonzero(alive & ~self.static), positions)
 
     def pairs(self):
         found = super().pairs()
