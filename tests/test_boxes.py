@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 import engines
 from own.brute import brute_pairs
+from own.common import swept_boxes
 from own.dimension import marker
 from own.grid import grid_box_pairs
 from own.large_cover import COVER_FROM, pairs_among_covered
@@ -276,15 +277,17 @@ def test_many_large_objects_pair_through_the_cells_they_cover(dim, data):
     assert as_set(buf[:found]) == as_set(ids[brute_pairs(positions, sizes)])
 
 
+@pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("sizes", ["boxes", "balls"])
 @pytest.mark.parametrize("params", [{"strips": "on"}, {"strips": "on", "incremental": True, "axis": "y"},
                                     {"strips": "on", "parallel": True, "parallel_from": 0}])
 @settings(max_examples=40, deadline=None)
 @given(data=st.data())
-def test_the_sweeps_strips_take_spread_sizes_with_a_large_bucket(sizes, params, data):
-    """The 2D sweep's strips sized by a typical box, the larger boxes queried against the strips
-    and paired among themselves (strips.py): exact over frames where the boxes change."""
-    positions, extents = data.draw(spread_sizes(2))
+def test_the_sweeps_strips_take_spread_sizes_with_a_large_bucket(dim, sizes, params, data):
+    """The 2D sweep's strips and the 3D sweep's columns sized by a typical box, the larger boxes
+    queried against them and paired among themselves (strips.py, columns.py): exact over frames
+    where the boxes change."""
+    positions, extents = data.draw(spread_sizes(dim))
     extents = extents if extents.ndim == 1 else extents[:, 0] if sizes == "balls" else extents
     rng = np.random.default_rng(len(positions))
     backend = engines.create("own.sap", skin=0, **params)
@@ -321,6 +324,39 @@ def test_the_grids_and_sweeps_take_many_large_boxes_apart(name, dim):
     if name == "own.grid" or (name.startswith("own.sap") and dim == 2):
         # The cells, not the sweep, paired them; the sweep's strips are sized by a typical box.
         assert backend.stats()["large"] >= COVER_FROM
+
+
+@pytest.mark.parametrize("name", ["own.sap", "own.sap_incremental", "own.sap_swept"])
+@pytest.mark.parametrize("huge", [10, 100])
+def test_the_3d_sweeps_columns_hold_a_few_huge_boxes_apart(name, huge):
+    """A few boxes across the scene among many small ones (crates put back at the top of the beams,
+    swept over both places): the columns sized by the small ones, the huge ones in a bucket of
+    their own, paired with the columns they span and among themselves (swept where they are few,
+    through the cells they cover where many): exact, each pair once."""
+    rng = np.random.default_rng(huge)
+    n = 3000
+    positions = rng.uniform(0, 300, (n, 3))
+    extents = rng.uniform(1, 3, (n, 3))
+    # Each long on one or two axes, short on the rest: their lower corners lie among the small
+    # boxes' on the short axes, where a small box in the column below can meet them.
+    long = rng.random((huge, 3)) < 0.4
+    long[np.arange(huge), rng.integers(0, 3, huge)] = True
+    extents[:huge] *= np.where(long, 50.0, 1.0)
+    backend = engines.create(name, strips="on")
+    backend.reset(positions, extents=extents)
+    for frame in range(3):
+        before = positions, extents
+        positions = positions + rng.normal(0, 1, (n, 3))
+        extents = extents * rng.uniform(0.9, 1.1, (n, 3))
+        backend.update(positions, extents=extents)
+        backend.validate()
+        got = backend.pairs()
+        # The swept form's answer: the pairs of the boxes swept over both frames.
+        boxes = swept_boxes(before[0], positions, before[1], extents) if name == "own.sap_swept" else \
+            (positions, extents)
+        assert len(as_set(got)) == len(got) and as_set(got) == as_set(box_pairs(*boxes)), f"frame {frame}"
+    if name != "own.sap_swept":  # the swept boxes are grown by the motion: their sizes are not these
+        assert backend.stats()["columns"] > 0 and 0 < backend.stats()["large"] <= 2 * huge
 
 
 @pytest.mark.parametrize("vector", [True, False])

@@ -11,7 +11,7 @@ from interface.checks import shown
 from interface.knobs import Knob, fixed
 
 from .coherent import RepairSchedule
-from .columns import COLUMN_PAD, COLUMNS_FROM_WINDOW, column_prepare, column_sweep
+from .columns import COLUMN_PAD, COLUMNS_FROM_WINDOW, column_pairs, column_prepare
 from .common import PairCollector, emit, gather, half_of, insertion_sort
 from .dimension import marker
 from .parallel import ChunkedPairCollector
@@ -422,6 +422,7 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         self._strips = 0  # strips swept this frame; 0: a plain sweep
         self._col_order, self._col_bounds = np.empty(n, dtype=np.int64), np.empty((2 * d, n))
         self._col_start, self._col_widest, self._col_w = np.empty(0, dtype=np.int64), np.empty(0), 0
+        self._col_plan = np.zeros(5)  # the columns' origin, side and counts (column_prepare)
         self._columns = 0  # columns swept this frame; 0: a plain sweep
         # The sparse sweep's float32 bounds, filled only in frames that use it (empty rows in the
         # others), and the window positions it sums; none where it can never run.
@@ -526,10 +527,12 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
             if not window >= COLUMNS_FROM_WINDOW:
                 self._stats["columns"] = 0
                 return
-        self._col_start, self._col_widest, self._col_w = column_prepare(
+        self._col_start, self._col_widest, self._col_w, self._col_plan = column_prepare(
             self._order[:self.n], self._bounds, self._column_side, self._col_order, self._col_bounds)
         self._columns = max(len(self._col_start) - self._col_w - 3, 0)
         self._stats["columns"] = self._columns
+        if self._columns:
+            self._stats["large"] = self.n - int(self._col_start[-1])
         self._sparse = self._sparse and not self._columns
         self._stats["sparse_sweep"] = int(self._sparse)
 
@@ -585,8 +588,10 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
         if self._strips:
             return self._strip_pairs()
         if self._columns:
-            out, (tested,) = self._collect(column_sweep, self._col_order, self._col_bounds, self._col_start,
-                                           self._col_widest, self._col_w)
+            built = self._anchor if self._anchor is not None else self._positions  # where the bounds were made
+            out, (tested,) = self._collect(column_pairs, self._col_order, self._col_bounds, self._col_start,
+                                           self._col_widest, self._col_w, self._col_plan, built, self._sweep_radii,
+                                           self._dim)
             self._stats["axis_overlaps"] = self._last_overlaps = tested
             self._last_pairs = len(out)
             return out
@@ -665,7 +670,11 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
                 "lower bounds are not sorted" + (" within a strip" if self._strips else "")
         if self._columns:
             start = self._col_start
-            assert start[-1] == n and (np.diff(start) >= 0).all(), "column starts are not a prefix sum"
+            assert start[-1] <= n and (np.diff(start) >= 0).all(), "column starts are not a prefix sum"
+            # The large bucket after the columns: wider across than a column, each.
+            across = np.maximum(*(np.diff(self._col_bounds[k:k + 2], axis=0)[0] for k in (2, 4)))
+            assert (across[start[-1]:] > self._col_plan[2] / COLUMN_PAD).all(), "a box in the large bucket fits"
+            assert (across[:start[-1]] <= self._col_plan[2] / COLUMN_PAD).all(), "a box in a column does not fit"
             assert np.array_equal(np.sort(self._col_order), np.arange(n)), "column order is not a permutation"
             for c in np.flatnonzero(np.diff(start)):
                 assert (np.diff(self._col_bounds[0, start[c]:start[c + 1]]) >= 0).all(), \

@@ -110,17 +110,27 @@ def strip_plan(positions, radii, axis_mode, always, last_axis):
 
 @nb.njit(cache=True)
 def _large_size(radii, widest):
+    """large_size over each box's larger half-extent."""
+    sizes = np.empty(radii.shape[0])
+    for i in range(radii.shape[0]):
+        sizes[i] = max(half_of(radii, i, 0), half_of(radii, i, 1))
+    return large_size(sizes, widest, LARGE_SHARE)
+
+
+@nb.njit(cache=True)
+def large_size(sizes, widest, share):
     """(large, reach): the half size above which a box is large, and the largest half size of the
-    others, which the strips hold. The smallest of SIZE_BINS steps of `widest` that at most
-    LARGE_SHARE of the boxes exceed; where none is large (equal sizes: every circle scene), inf
+    others, which the strips (own.sap's columns in 3D) hold, from each box's half size across them
+    (`sizes`, at most `widest`). The smallest of SIZE_BINS steps of `widest` that at most `share`
+    of the boxes exceed; where none is large (equal sizes: every circle scene), inf
     and `widest`, the strips as before."""
-    n = radii.shape[0]
+    n = sizes.shape[0]
     counts = np.zeros(SIZE_BINS + 1, dtype=np.int64)
     scale = SIZE_BINS / widest
     for i in range(n):
-        counts[int(max(half_of(radii, i, 0), half_of(radii, i, 1)) * scale)] += 1  # bin SIZE_BINS: widest
+        counts[int(sizes[i] * scale)] += 1  # bin SIZE_BINS: widest
     above, b = 0, SIZE_BINS
-    while b > 0 and above + counts[b] <= LARGE_SHARE * n:  # bin b can go to the large bucket
+    while b > 0 and above + counts[b] <= share * n:  # bin b can go to the large bucket
         above += counts[b]
         b -= 1
     large = (b + 1) / scale

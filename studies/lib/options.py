@@ -80,11 +80,13 @@ def dim_of(args: argparse.Namespace) -> int:
 def add_scene_file_option(parser) -> None:
     """--scene: the user's own scene (in place of a generated one; the stress study adds it to its set)."""
     files = parser.add_mutually_exclusive_group()
-    files.add_argument("--scene", metavar="FILE.csv", help="your own scene: a CSV file with columns x,y,r and "
-                                                            "optional vx,vy (see the README)")
+    files.add_argument("--scene", metavar="FILE.csv", help="your own scene: a CSV file with columns x,y,r (boxes: "
+                                                            "x,y,hx,hy; in 3D with z and hz) and optional vx,vy (see "
+                                                            "the README)")
     files.add_argument("--trajectory", metavar="FILE", help="your own recorded frames: .npz with positions, radii "
-                                                             "and optional alive, static, box, or a .csv with columns "
-                                                             "frame,id,x,y,r and optional static (see the README)")
+                                                             "(boxes: extents) and optional alive, static, box; a .csv "
+                                                             "with columns frame,id,x,y,r (boxes: hx,hy) and optional "
+                                                             "static; or Broadmark's .aabbs (see the README)")
 
 
 def file_scene(args: argparse.Namespace) -> Scene | None:
