@@ -71,6 +71,8 @@ def main(argv: list[str] | None = None) -> int:
         return report(Path(args.out), report_dir(args, read_meta(Path(args.out))))
     chosen = matched_backends(args.backends)
     command = command_line("boxes", argv)
+    # Every command that measured rows here: a resumed run may add families, sizes or backends.
+    commands = (read_meta(Path(args.out)).get("commands", []) if args.resume else []) + [command]
     with Output(args.out, "boxes", command, args.resume) as out:
         unavailable = warn_unavailable(chosen)
         runnable = [b for b in chosen if b not in unavailable]
@@ -78,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
         runner = Runner(writer, out, pool=Pool.from_args(args))
         full = not args.quick and set(args.family_list) == set(BOX_FAMILIES) and args.backends == "*"
         out.meta(full=full, families=args.family_list, sizes=args.size_list, frames=args.frames, repeats=args.repeat,
-                 unavailable=unavailable, commands=[command])
+                 unavailable=unavailable, commands=commands)
         jobs = []
         for dim in sorted({BOX_FAMILIES[f] for f in args.family_list}):
             print(f"{dim}D boxes: ", end="")

@@ -110,6 +110,11 @@ def test_the_boxes_study_sets_each_backend_on_boxes_beside_their_bounding_circle
     assert summary.circle_model_per_box_pair.iloc[0] > 1.5  # the walls' bounding circles overlap far more
     table = md.split("## walls (2D), n = 300", 1)[1]
     assert "| own.grid | " in table and "| scipy.kdtree |" not in table  # ranked on the boxes
+    # A resumed run adds its backends, and the report names both commands that measured its rows.
+    assert boxes_study.main(["--families", "walls", "--sizes", "300", "--frames", "2", "--repeat", "1",
+                             "--backends", "own.bvh", "--out", str(out), "--resume"]) == 0
+    md = (out / "BOXES-300.md").read_text()
+    assert "--backends own.grid,own.sap,scipy.kdtree" in md and "--backends own.bvh" in md and "| own.bvh |" in md
 
 
 def test_the_boxes_report_stands_where_no_backend_finished_on_the_circles(tmp_path, capsys):
