@@ -741,3 +741,15 @@ def test_the_readme_boxes_example_runs():
     exec(code, scope)  # noqa: S102 - the README's own example
     pairs, positions, static = scope["pairs"], scope["positions"], scope["static"]
     assert as_set(pairs) == as_set(box_pairs(positions, scope["turned"], None, static))
+
+
+def test_the_3d_sweeps_columns_take_points_beside_a_few_boxes():
+    """Only points fit under the large bucket's size, and every lower corner is at one place: the
+    columns stay as wide as the widest box (a width of zero would divide by zero)."""
+    positions, extents = np.zeros((200, 3)), np.zeros((200, 3))
+    positions[:5], extents[:5] = 10.0, 10.0  # their lower corners at the points
+    for strips in ("on", "auto"):
+        backend = engines.create("own.sap", strips=strips, skin=0)
+        backend.reset(positions, extents=extents)
+        backend.validate()
+        assert as_set(backend.pairs()) == as_set(box_pairs(positions, extents))

@@ -74,7 +74,8 @@ def column_prepare(order, boxes, side, col_order, col_boxes):
             for a in range(n):
                 if across[a] <= large:
                     reach = max(reach, across[a])
-            side = min(side, 2.0 * reach * COLUMN_PAD)
+            if reach > 0:  # else only points fit: the columns stay as wide as the widest box
+                side = min(side, 2.0 * reach * COLUMN_PAD)
     most = MAX_COLUMNS_PER_OBJECT * n + 64  # tiny boxes over a wide plane: wider columns, not a huge table
     side = max(side, np.sqrt(du * dv / most), du / most, dv / most)
     while (np.floor(du / side) + 1) * (np.floor(dv / side) + 3) > most:
