@@ -753,3 +753,20 @@ def test_the_3d_sweeps_columns_take_points_beside_a_few_boxes():
         backend.reset(positions, extents=extents)
         backend.validate()
         assert as_set(backend.pairs()) == as_set(box_pairs(positions, extents))
+
+
+@pytest.mark.parametrize("offset", [0.0, 1000.0, -12345.6])
+def test_the_3d_sweeps_columns_hold_equal_spheres_all(offset):
+    """Equal sizes leave no large bucket: a sphere's width from its bounds, (c + r) - (c - r),
+    rounds a few ulps either side of 2 r, and must not read as wider than a column."""
+    rng = np.random.default_rng(1)
+    positions = rng.uniform(0, 400, (4096, 3)) + offset
+    radii = np.full(4096, 10.0 / 3.0)
+    backend = engines.create("own.sap", strips="on")
+    backend.reset(positions, radii)
+    for _ in range(2):
+        positions = positions + rng.normal(0, 0.5, positions.shape)
+        backend.update(positions)
+        backend.validate()
+        assert as_set(backend.pairs()) == as_set(brute_pairs(positions, radii))
+        assert backend.stats()["columns"] > 0 and backend.stats()["large"] == 0

@@ -82,7 +82,9 @@ def column_prepare(order, boxes, side, col_order, col_boxes):
         side *= 1.25
     nu, nv = int(du / side) + 1, int(dv / side) + 1
     w = nv + 2
-    fits = side / COLUMN_PAD  # wider than this across: the large bucket
+    # Wider than a column across: the large bucket. Not side / COLUMN_PAD: a box's width from its
+    # bounds rounds (c + r) - (c - r) a few ulps over 2 r, and equal spheres went to the bucket.
+    fits = side
     keys = np.empty(n, dtype=np.int64)
     large_key = nu * w + w + 2  # the last bucket, after the last column's four neighbours
     start = np.zeros(large_key + 2, dtype=np.int64)

@@ -673,8 +673,8 @@ class SweepAndPrune(StaticsApart, SmallScenes, BroadPhase):
             assert start[-1] <= n and (np.diff(start) >= 0).all(), "column starts are not a prefix sum"
             # The large bucket after the columns: wider across than a column, each.
             across = np.maximum(*(np.diff(self._col_bounds[k:k + 2], axis=0)[0] for k in (2, 4)))
-            assert (across[start[-1]:] > self._col_plan[2] / COLUMN_PAD).all(), "a box in the large bucket fits"
-            assert (across[:start[-1]] <= self._col_plan[2] / COLUMN_PAD).all(), "a box in a column does not fit"
+            assert (across[start[-1]:] > self._col_plan[2]).all(), "a box in the large bucket fits"
+            assert (across[:start[-1]] <= self._col_plan[2]).all(), "a box in a column does not fit"
             assert np.array_equal(np.sort(self._col_order), np.arange(n)), "column order is not a permutation"
             for c in np.flatnonzero(np.diff(start)):
                 assert (np.diff(self._col_bounds[0, start[c]:start[c + 1]]) >= 0).all(), \
