@@ -66,6 +66,7 @@ print(ready - start, time.perf_counter() - ready)
 # A quick run leaves out the cold compile, which compiles every kernel of ours into an empty
 # cache (40 s of its two minutes on 2 cores).
 QUICK_COMPILE = {"skipped": "not measured in a quick run (it compiles every kernel into an empty cache)"}
+UNMEASURED_COMPILE = {"skipped": "not measured: the run that wrote these rows ended before it measured them"}
 
 
 def compile_times(ours: list[str] | None = None) -> dict[str, float | str]:
@@ -401,14 +402,16 @@ def main(argv: list[str] | None = None) -> int:
 
 def report_only(args, argv) -> int:
     """Figure and report again from --out's rows; those of an interrupted run (results.partial.csv)
-    too, marked as such. Compile times come from its meta.json, or are measured now."""
+    too, marked as such. Compile times come from its meta.json; a run that ended before it
+    measured them has none (measuring them here would take minutes, for a report)."""
     out = Path(args.out)
     rows, complete = read_rows(out)
     medians, stopped = summarise_sizes(rows)
     meta = read_meta(out)
     # The command that measured the rows stays on record; this one only redid the report.
     meta.update(report_command=command_line("scale", argv), interrupted=None)
-    meta.setdefault("compile", compile_times())
+    if "compile" not in meta:
+        meta["compile"] = UNMEASURED_COMPILE
     # Warned about only when the earlier run did not record them: they are not run again here.
     if "unavailable" not in meta:
         meta["unavailable"] = warn_unavailable(matched_backends("*"))

@@ -1,8 +1,8 @@
-"""Shared test settings: hypothesis profiles (seeded, no deadline: the first call JIT-compiles),
-a check after every test that it left the checkout as it was (every test writes under its own
-temporary folder: never results/ or docs/ of the repository), and one temporary folder for the
-whole run, removed at its end, so that what engines and Dask leave in the temporary directory
-(PhysX's hub lock, Dask's scratch space) does not stay on the machine."""
+"""Shared test settings: the two tiers (tiers.py), hypothesis seeded with no deadline (the first
+call JIT-compiles), a check after every test module that it left the checkout as it was (every
+test writes under its own temporary folder: never results/ or docs/ of the repository), and one
+temporary folder for the whole run, removed at its end, so that what engines and Dask leave in the
+temporary directory (PhysX's hub lock, Dask's scratch space) does not stay on the machine."""
 
 import atexit
 import os
@@ -13,9 +13,19 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, settings
 
+import tiers
+
 ROOT = Path(__file__).resolve().parents[1]
 
+
+def pytest_addoption(parser):
+    parser.addoption("--thorough", action="store_true",
+                     help="run the thorough tier: the tests marked thorough, and every property-based "
+                          "test at its full count of examples (the fast tier runs without it)")
+
+
 def pytest_configure(config):
+    tiers.THOROUGH = config.getoption("thorough")
     # Before anything reads it: child processes inherit TMPDIR, and libraries read it when they start.
     if "BROADPHASE_TEST_TMPDIR" not in os.environ:
         folder = tempfile.mkdtemp(prefix="broadphase-tests-")
@@ -28,10 +38,22 @@ def pytest_configure(config):
 settings.register_profile(
     "default", deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
 )
-settings.register_profile(
-    "thorough", deadline=None, max_examples=1000, suppress_health_check=[HealthCheck.too_slow]
-)
-settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
+settings.load_profile("default")
+
+
+def pytest_collection_modifyitems(config, items):
+    """The fast tier leaves out the tests marked thorough; the thorough tier runs those and the
+    property-based tests (at their full count), and leaves the rest to the fast tier."""
+    def thorough(item):
+        return item.get_closest_marker("thorough") is not None
+
+    def property_based(item):
+        return getattr(getattr(item, "obj", None), "is_hypothesis_test", False)
+
+    keep = (lambda item: thorough(item) or property_based(item)) if tiers.THOROUGH else \
+        (lambda item: not thorough(item))
+    config.hook.pytest_deselected(items=[item for item in items if not keep(item)])
+    items[:] = [item for item in items if keep(item)]
 
 
 def checkout_state() -> dict[str, tuple[int, int]]:
@@ -48,7 +70,7 @@ def checkout_state() -> dict[str, tuple[int, int]]:
     return state
 
 
-@pytest.fixture(autouse=True)
+@pytest.fixture(autouse=True, scope="module")
 def leaves_the_checkout_clean():
     before = checkout_state()
     yield
@@ -56,4 +78,4 @@ def leaves_the_checkout_clean():
     changed = sorted(k for k in before.keys() | after.keys() if before.get(k) != after.get(k))
     # Caches the interpreter and tools keep are theirs to write.
     changed = [k for k in changed if not k.startswith((".pytest_cache", ".hypothesis", "__pycache__"))]
-    assert not changed, f"the test wrote into the checkout: {changed}"
+    assert not changed, f"a test of this module wrote into the checkout: {changed}"

@@ -155,3 +155,35 @@ def box_scenes(draw, dim: int = 2, max_n: int = 150):
         extents = np.full((n, dim), 0.5)
     shift = draw(st.sampled_from([0.0, -1e4, 1e6]))
     return positions + shift, extents
+
+
+@st.composite
+def touching_boxes(draw, dim: int = 2, max_n: int = 120):
+    """Boxes whose bounds are equal to other boxes' bounds, where a test other than the rule (a
+    centre distance against a sum of half-extents) rounds differently from comparing c - h with
+    c + h: tile maps of sides that float64 cannot represent (0.1, 1/3), shared edges and corners,
+    zero extents on another box's corner, -0.0, subnormal and 1e-300 sizes."""
+    n = draw(st.integers(0, max_n))
+    rng = np.random.default_rng(draw(st.integers(0, 2**31 - 1)))
+    kind = draw(st.sampled_from(["tiles", "corners", "negative_zero", "subnormal", "tiny"]))
+    if kind in ("tiles", "tiny", "subnormal"):
+        step = {"tiles": draw(st.sampled_from([0.1, 1 / 3, 0.7, 0.3, 1e5 / 3])),
+                "tiny": 1e-300, "subnormal": 5e-324}[kind]
+        cells = rng.integers(0, 6 if kind == "subnormal" else 10, (n, dim))
+        # Centres at step/2 + step k, the tile map's way; subnormals at k * step, a box a step wide.
+        centres = cells * step + (0.0 if kind == "subnormal" else step / 2)
+        extents = np.full((n, dim), step if kind == "subnormal" else step / 2)
+        extents[rng.random(n) < 0.2] = 0.0  # points on the tiles' edges and corners too
+        return centres, extents
+    if kind == "corners":  # boxes of side 0.1, and points at their corners
+        centres = rng.integers(0, 8, (n, dim)) * 0.1 + 0.05
+        extents = np.full((n, dim), 0.05)
+        points = rng.random(n) < 0.4
+        signs = rng.choice([-1.0, 1.0], (n, dim))
+        centres[points] = centres[points] + signs[points] * 0.05
+        extents[points] = 0.0
+        return centres, extents
+    # -0.0 and 0.0 as centres and extents: equal under the rule.
+    centres = rng.choice([-0.0, 0.0, 1.0, -1.0], (n, dim))
+    extents = rng.choice([-0.0, 0.0, 0.5, 1.0], (n, dim))
+    return centres, extents

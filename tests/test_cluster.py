@@ -18,6 +18,9 @@ import pytest
 from studies import scale
 from studies.lib.cli import run_cli
 
+# Clusters of worker processes and fresh interpreters: the thorough tier.
+pytestmark = pytest.mark.thorough
+
 ROOT = Path(__file__).resolve().parents[1]
 GRID = ["--quick", "--max-log2-n", "8", "--backends", "own.grid,own.sap,scipy.kdtree"]
 # What a job measured, apart from its timings and where it ran.

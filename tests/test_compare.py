@@ -81,6 +81,7 @@ def test_spheres_run_every_3d_backend_on_one_stepped_scene_and_name_the_2d_ones(
     assert len(meta["scene"]["box"]) == 6
 
 
+@pytest.mark.thorough
 def test_a_3d_scene_file_runs_with_its_z_column_and_a_2d_backend_alone_is_refused(tmp_path, capsys):
     scene = tmp_path / "balls.csv"
     scene.write_text("x,y,z,r\n0,0,0,1\n0,0,1.5,1\n10,10,10,2\n")
@@ -104,6 +105,7 @@ def test_list_for_spheres_marks_the_backends_that_work_in_2d_only(capsys):
     assert "2D ONLY" in lines["chipmunk.bbtree"] and "available" in lines["own.grid"]
 
 
+@pytest.mark.thorough
 def test_user_scene_file_and_backend_patterns(tmp_path):
     scene = tmp_path / "mine.csv"
     scene.write_text("x,y,r\n0,0,1\n1.5,0,1\n10,10,2\n")
@@ -276,6 +278,7 @@ def test_a_backend_over_budget_in_a_later_repeat_says_its_earlier_rows_are_kept(
     assert [r["status"] for r in outcome.rows] == ["ok"] * (small_trajectory.frames - 1) + [outcome.rows[-1]["status"]]
 
 
+@pytest.mark.thorough
 def test_input_a_real_engine_would_crash_on_is_its_outcome_and_the_study_goes_on(tmp_path):
     # coal.sap segfaults on zero radii (see test_engines): the interface refuses them, and compare
     # records the refusal as coal.sap's outcome while own.grid runs. (A crash that gets through is

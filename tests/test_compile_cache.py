@@ -5,12 +5,17 @@ and grew the cache by a file each run)."""
 
 from __future__ import annotations
 
+import pytest
+
 import subprocess
 import sys
 from pathlib import Path
 
 import engines
 import own
+
+# Clusters of worker processes and fresh interpreters: the thorough tier.
+pytestmark = pytest.mark.thorough
 
 PROBE = Path(__file__).with_name("compile_probe.py")
 OURS = [n for n in engines.names() if engines.family(n).kind == "own"]

@@ -18,6 +18,7 @@ import pytest
 from test_engines import LIMITATIONS, UNRELIABLE
 
 import engines
+import tiers
 from interface.pairs import missing
 from own.reference import box_pairs, narrow_phase
 
@@ -107,19 +108,30 @@ def available_in(dim: int) -> list[str]:
     return [n for n in engines.available() if engines.works_in(n, dim)]
 
 
-def every_outcome(dim: int) -> dict[str, dict[str, list]]:
-    """Case name -> backend -> outcome, for every backend that works in `dim`."""
-    return {case.name: {name: outcome(name, case, dim) for name in available_in(dim)} for case in CASES}
+def every_outcome(dim: int, names: list[str]) -> dict[str, dict[str, list]]:
+    """Case name -> backend -> outcome of the cases `names`, for every backend that works in `dim`."""
+    return {case.name: {name: outcome(name, case, dim) for name in available_in(dim)} for case in CASES
+            if case.name in names}
+
+
+# The fast tier's cases, one of each kind of input (sizes below a double's resolution, a reach that
+# overflows, a static that moves); the thorough tier runs the others.
+FAST_CASES = ["every radius subnormal", "a radius sum that overflows", "a static that moves"]
+
+
+def tier_cases() -> list[Case]:
+    return [c for c in CASES if (c.name in FAST_CASES) != tiers.THOROUGH]
 
 
 @pytest.fixture(scope="module")
 def outcomes() -> dict[int, dict[str, dict[str, list]]]:
-    """Every outcome, from a fresh process per dimension that never runs an engine itself: forked
-    from this test process, which has (Rapier's worker threads, TBB's), a child could wait forever
-    on a pool whose threads did not come along."""
+    """Every outcome of this tier's cases, from a fresh process per dimension that never runs an
+    engine itself: forked from this test process, which has (Rapier's worker threads, TBB's), a
+    child could wait forever on a pool whose threads did not come along."""
     found = {}
+    names = [c.name for c in tier_cases()]
     for dim in (2, 3):
-        run = subprocess.run([sys.executable, __file__, str(dim)], capture_output=True, text=True,
+        run = subprocess.run([sys.executable, __file__, str(dim), *names], capture_output=True, text=True,
                              timeout=TIME_LIMIT_S * 20 + 600)
         assert run.returncode == 0, run.stderr[-3000:]
         found[dim] = json.loads(run.stdout.strip().splitlines()[-1])
@@ -131,7 +143,8 @@ def declared(name: str, positions: np.ndarray, radii: np.ndarray) -> bool:
     return name in UNRELIABLE or any(applies(positions, radii) for applies in LIMITATIONS.get(name, []))
 
 
-@pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
+@pytest.mark.parametrize("case", [c if c.name in FAST_CASES else pytest.param(c, marks=pytest.mark.thorough)
+                                  for c in CASES], ids=[c.name for c in CASES])
 @pytest.mark.parametrize("dim", [2, 3])
 def test_every_backend_answers_exactly_or_refuses_in_one_line(outcomes, case, dim):
     problems = []
@@ -169,4 +182,4 @@ def test_the_cases_are_what_they_say():
 
 
 if __name__ == "__main__":  # the fixture's driver: one dimension's outcomes as JSON
-    print(json.dumps(every_outcome(int(sys.argv[1]))))
+    print(json.dumps(every_outcome(int(sys.argv[1]), sys.argv[2:])))

@@ -19,7 +19,7 @@ import textwrap
 
 import numpy as np
 import pytest
-from hypothesis import assume, given, settings
+from hypothesis import assume, given
 
 import engines
 from interface.pairs import is_canonical, missing
@@ -28,6 +28,7 @@ from scenes import generate
 from scenes.families import family_scene
 from scenes.motion import simulate
 from strategies import BOUNDARY, any_scene, sphere_scenes
+from tiers import examples
 
 ENGINES = [n for n in engines.names() if n.split(".")[0] not in ("own", "essay")]
 
@@ -160,7 +161,7 @@ def check_scene(name, positions, radii):
 
 
 @pytest.mark.parametrize("name", RELIABLE)
-@settings(max_examples=30)
+@examples(30)
 @given(scene=any_scene)
 def test_engine_never_misses_on_random_and_adversarial_scenes(name, scene):
     positions, radii = scene
@@ -272,7 +273,7 @@ def test_every_3d_engine_takes_spheres_and_only_the_2d_ones_refuse_them(name):
 
 
 @pytest.mark.parametrize("name", SPHERE_ENGINES)
-@settings(max_examples=25)
+@examples(25)
 @given(scene=sphere_scenes(max_n=80))
 def test_engine_never_misses_on_random_and_adversarial_sphere_scenes(name, scene):
     positions, radii = scene
@@ -406,6 +407,7 @@ def overlapping_cubes(n: int) -> tuple[np.ndarray, np.ndarray]:
     return np.column_stack([k % 100, k // 100, np.zeros(n)]) * 1.5, np.ones((n, 3))
 
 
+@pytest.mark.thorough
 @pytest.mark.parametrize("name", ["bullet.dbvt", "bullet.simple"])
 def test_bullet_reads_more_contacts_than_one_reply_holds(name):
     """A frame of few contacts (read in one call), then one of more than one reply holds: the read
@@ -607,6 +609,7 @@ UNGUARDED = textwrap.dedent("""
 @pytest.mark.engine_limitation
 @pytest.mark.parametrize(("name", "positions", "radii", "words", "unguarded"), REFUSED,
                          ids=[f"{r[0]}-{k}" for k, r in enumerate(REFUSED)])
+@pytest.mark.thorough
 def test_the_guards_are_needed_unguarded_the_engine_fails(name, positions, radii, words, unguarded, tmp_path):
     """What each engine does with the input it refuses, when the interface lets it through."""
     make(name)  # skips when the engine is missing
@@ -650,6 +653,7 @@ def test_box2d_v2_profile_timer_drops_the_start_times_sub_millisecond_part():
     assert whole.mean() >= 0.9 and (differences[whole] >= 0.5).any(), differences
 
 
+@pytest.mark.thorough
 @pytest.mark.engine_limitation
 def test_coal_tree_array_crashes_in_a_plain_script_but_not_after_a_large_import(tmp_path):
     """Why coal.tree_array at n = 8192 segfaulted in a plain script but not after

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import given
 
 import engines
 from interface.pairs import is_canonical, keys
 from own.brute import brute_pairs
 from scenes import generate
 from strategies import generated_scenes, lattice_scenes
+from tiers import examples
 
 ESSAY = ["essay.sap", "essay.grid", "essay.quadtree"]
 
@@ -28,7 +29,7 @@ def assert_superset(name, positions, radii, **params):
 
 
 @pytest.mark.parametrize("name", ESSAY)
-@settings(max_examples=40)
+@examples(40)
 @given(scene=generated_scenes(max_n=80) | lattice_scenes(max_n=60))
 def test_essay_backends_never_miss(name, scene):
     assert_superset(name, *scene)

@@ -74,6 +74,18 @@ def test_plan_covers_every_experiment():
     assert len({r.key for r in runs}) == len(runs)
 
 
+def test_one_frame_of_the_quick_study_runs_every_experiment_and_reports(tmp_path):
+    from studies import essay
+
+    out = tmp_path / "essay"
+    assert essay.main(["--quick", "--frames", "1", "--repeat", "1", "--out", str(out)]) == 0
+    rows = pd.read_csv(out / "results.csv")
+    assert set(rows.experiment.astype(str)) == {"1", "2", "3", "4", "5", "6", "Q1", "Q2", "Q3", "D", "C"}
+    assert (rows.status == "ok").all() and (rows[rows.backend.str.startswith("own.")].missed == 0).all()
+    assert "| The essay says |" in (out / "RESULTS.md").read_text()
+
+
+@pytest.mark.thorough
 def test_quick_study_end_to_end_and_resume(tmp_path):
     out = tmp_path / "essay"
     cmd = [sys.executable, "-m", "studies.essay", "--quick", "--out", str(out)]

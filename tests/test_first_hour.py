@@ -40,6 +40,7 @@ def test_a_described_scene_keeps_the_essays_coverage_whatever_its_radii():
     assert generate("uniform", 2048, box=None).box == (0.0, 0.0, 2000.0, 2000.0)  # the essay's own scene
 
 
+@pytest.mark.thorough
 def test_recommend_answers_on_a_large_mixed_scene_within_its_limit(tmp_path, capsys):
     out = tmp_path / "rec"
     start = time.monotonic()
@@ -122,6 +123,7 @@ def test_our_exact_backends_take_coordinates_near_the_largest_double(name):
     backend.validate()
 
 
+@pytest.mark.thorough
 def test_show_and_recommend_take_a_scene_near_the_largest_double(tmp_path):
     scene = tmp_path / "far.csv"
     scene.write_text("x,y,r\n-1e308,0,1\n1e308,0,1\n1e308,1,1\n0,5e307,1e300\n")

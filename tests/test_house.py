@@ -168,6 +168,7 @@ def test_each_shared_option_means_the_same_in_every_command():
             assert command in seen[option], f"{command} lacks {option}"
 
 
+@pytest.mark.thorough
 def test_python_m_studies_lists_the_commands_and_the_console_script_runs_from_anywhere(tmp_path):
     listed = subprocess.run([sys.executable, "-m", "studies"], cwd=tmp_path, capture_output=True, text=True)
     assert listed.returncode == 0 and all(name in listed.stdout for name in COMMANDS)

@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 import engines
 from interface.pairs import canonical, is_canonical
 from own.brute import brute_pairs
-from own.reference import BRUTE_FORCE_LIMIT, box_pairs, narrow_phase
+from own.reference import box_pairs, narrow_phase
 from scenes import generate
+from tiers import examples
 
 OWN = ["own.brute", "own.sap", "own.grid", "own.grid_incremental", "own.quadtree", "own.bvh", "essay.sap", "essay.grid", "essay.quadtree"]
 
@@ -105,7 +106,7 @@ def test_canonical_orders_and_deduplicates():
     assert "i >= j" in is_canonical(np.array([[1, 0]]), 2)
 
 
-@settings(max_examples=200, deadline=None)
+@examples(200)
 @given(st.lists(st.tuples(st.integers(0, 2**40), st.integers(0, 2**40)), max_size=60))
 def test_canonical_is_the_sorted_set_of_pairs(rows):
     # Engines' pairs go through it (ids up to 2^40: its keys must not overflow or collide).
@@ -119,8 +120,3 @@ def test_narrow_phase_counts_touching_circles():
     pos = np.array([[0.0, 0.0], [2.0, 0.0], [0.0, 2.0 + 1e-12], [3.0, 3.0]])
     pairs = brute_pairs(pos, np.ones(4))
     assert narrow_phase(pos, np.ones(4), pairs).tolist() == [[0, 1]]
-
-
-def test_reference_above_the_brute_force_limit_uses_the_exact_grid():
-    scene = generate("clusters", BRUTE_FORCE_LIMIT + 500, seed=8)
-    np.testing.assert_array_equal(box_pairs(scene.positions, scene.radii), brute_pairs(scene.positions, scene.radii))

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 from test_engines import RELIABLE, make
 
@@ -18,6 +18,7 @@ from own.reference import box_pairs, narrow_phase
 from scenes.motion import simulate
 from scenes.recorded import recorded_scene
 from test_own_exact import EXACT, IDS
+from tiers import examples
 
 OWN_AND_ESSAY = [n for n in engines.names() if n.split(".")[0] in ("own", "essay")]
 
@@ -80,7 +81,7 @@ def test_every_3d_backend_takes_statics_and_spawning_of_spheres(name):
 
 
 @pytest.mark.parametrize(("name", "params"), EXACT, ids=IDS)
-@settings(max_examples=10)
+@examples(10)
 @given(seed=st.integers(0, 2**31 - 1), n=st.integers(0, 90), share=st.sampled_from([0.0, 0.5, 0.95, 1.0]))
 def test_exact_backends_are_exact_with_statics_and_spawning(name, params, seed, n, share):
     traj = simulate(lifecycle_scene(n=n, frames=4, seed=seed, static_share=share), 4)

@@ -50,6 +50,7 @@ def snapshot(folder: Path) -> dict[str, bytes]:
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
+@pytest.mark.thorough
 @pytest.mark.parametrize("study, argv", BAD_INPUTS, ids=[f"{s}-{a[-2]}-{a[-1][:8]}" for s, a in BAD_INPUTS])
 def test_bad_input_leaves_a_finished_out_folder_as_it_was(tmp_path, study, argv):
     finished = tmp_path / "finished"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 import engines
@@ -18,6 +18,7 @@ from scenes import generate
 from scenes.motion import simulate
 from scenes.stress import STRESS_SCENES
 from strategies import BOUNDARY, any_scene
+from tiers import examples
 
 # (backend, params): every exact backend with the parameter settings that change its code paths.
 EXACT = [
@@ -92,7 +93,7 @@ def assert_exact(name, params, positions, radii):
 
 
 @pytest.mark.parametrize(("name", "params"), EXACT, ids=IDS)
-@settings(max_examples=150)
+@examples(150)
 @given(scene=any_scene)
 def test_exact_on_random_and_adversarial_scenes(name, params, scene):
     assert_exact(name, params, *scene)
@@ -352,7 +353,7 @@ INCREMENTAL = [("own.grid_incremental", {}), ("own.grid_incremental", {"cell": 5
 
 
 @pytest.mark.parametrize(("name", "params"), INCREMENTAL, ids=lambda v: str(v))
-@settings(max_examples=60)
+@examples(60)
 @given(scene=any_scene, seed=st.integers(0, 2**32 - 1), steps=st.lists(st.floats(0.0, 3.0), min_size=1, max_size=4),
        equal=st.booleans())
 def test_grid_incremental_stays_exact_while_objects_drift_between_cells(name, params, scene, seed, steps, equal):
@@ -547,7 +548,7 @@ def test_grid_incremental_rebuilds_into_a_larger_grid_when_the_scene_spreads_out
         assert np.array_equal(np.sort(keys(grid.pairs(), 1000)), np.sort(keys(brute_pairs(positions, radii), 1000)))
 
 
-@settings(max_examples=60)
+@examples(60)
 @given(scene=any_scene, steps=st.lists(st.floats(0.0, 40.0), min_size=1, max_size=8),
        skin=st.sampled_from([0.0, 0.3, 2.0, 25.0]), fat=st.booleans(), seed=st.integers(0, 2**16))
 def test_verlet_list_is_exact_under_its_rebuild_rule_across_stepped_frames(scene, steps, skin, fat, seed):
@@ -575,7 +576,7 @@ def test_verlet_list_is_exact_under_its_rebuild_rule_across_stepped_frames(scene
 
 
 @pytest.mark.parametrize("name", ["own.quadtree", "own.bvh", "own.sap", "own.sap_incremental", "own.sap_parallel"])
-@settings(max_examples=40)
+@examples(40)
 @given(scene=any_scene, steps=st.lists(st.sampled_from([0.0, 0.01, 0.3, 3.0, 40.0]), min_size=1, max_size=14),
        seed=st.integers(0, 2**16))
 def test_trees_are_exact_while_kept_under_their_skin_across_stepped_frames(name, scene, steps, seed):

@@ -6,13 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import shapely
-from hypothesis import given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 import engines
 from interface.queries import check_rays
 from own.query_reference import boxes_meeting, closest_hits, every_ray_hit, points_inside
 from studies.lib.query_runs import SAME_HIT_SHARE, starting_outside
+from tiers import examples
 
 ENGINE_HIT_SHARE = 1e-3
 ANSWERING = [n for n in engines.available() if engines.backend_class(n).answers]
@@ -113,7 +114,7 @@ def segment_meets(o, u, length, centre, size) -> tuple[bool, bool]:
 
 
 @pytest.mark.parametrize("dim", [2, 3])
-@settings(max_examples=60, deadline=None)
+@examples(60)
 @given(data=st.data())
 def test_the_reference_rays_agree_with_independent_geometry(dim, data):
     positions, sizes, origins, directions, lengths = data.draw(scenes_and_rays(dim))
@@ -234,7 +235,7 @@ def assert_answers_as_the_reference(backend, positions, sizes, origins, directio
 @pytest.mark.parametrize("name", STRUCTURES)
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("small_scene_n", [0, None])  # 0: the structure at every n; None: the backend's own
-@settings(max_examples=40, deadline=None)
+@examples(40)
 @given(data=st.data())
 def test_a_structure_answers_as_the_reference_on_random_and_adversarial_scenes(name, dim, small_scene_n, data):
     """Rays, box and point queries on random scenes, on a lattice (rays along rows of centres and
@@ -260,15 +261,16 @@ def test_a_structure_answers_as_the_reference_on_random_and_adversarial_scenes(n
 @pytest.mark.parametrize("name", STRUCTURES)
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("boxes", [False, True])
-def test_a_structure_finds_the_closest_hit_among_many_overlapping_shapes(name, dim, boxes):
+@pytest.mark.parametrize(("n", "m"), [(600, 400), pytest.param(3000, 2000, marks=pytest.mark.thorough)])
+def test_a_structure_finds_the_closest_hit_among_many_overlapping_shapes(name, dim, boxes, n, m):
     """Thousands of overlapping shapes of spread sizes, rays of every length from inside and
     outside: the nearer node is often entered first yet holds only a farther hit, which is where
     a search that drops nodes too eagerly returns a wrong closest hit."""
     if dim not in engines.backend_class(name).dims:
         pytest.skip(f"{name} works in 2D only")
     rng = np.random.default_rng(dim + 2 * boxes)
-    n, m = 3000, 2000
-    positions = rng.uniform(0, 100 if dim == 2 else 30, (n, dim))
+    side = (100 if dim == 2 else 30) * (n / 3000) ** (1 / dim)  # as crowded at every n
+    positions = rng.uniform(0, side, (n, dim))
     sizes = rng.uniform(0.1, 1, (n, dim) if boxes else n) * np.exp(rng.uniform(0, 2.5, (n, 1) if boxes else n))
     origins = rng.uniform(-10, 110 if dim == 2 else 40, (m, dim))
     directions, lengths = rng.normal(size=(m, dim)), rng.choice([1.0, 10.0, 200.0], m)

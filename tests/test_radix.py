@@ -1,16 +1,17 @@
 """The radix sort under own.sap and own.bvh: the same order as numpy's stable sort."""
 
 import numpy as np
-from hypothesis import given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from own.radix import radix_argsort, sortable_bits
+from tiers import examples
 
 FINITE = st.floats(allow_nan=False, allow_infinity=False, allow_subnormal=True)
 
 
-@settings(max_examples=200, deadline=None)
+@examples(200)
 @given(arrays(np.float64, st.integers(0, 300), elements=FINITE | st.sampled_from([0.0, -0.0, 1.0, -1.0])))
 def test_float_keys_sort_as_the_floats_do(values):
     order = radix_argsort(sortable_bits(values))
@@ -21,7 +22,7 @@ def test_float_keys_sort_as_the_floats_do(values):
     assert np.array_equal(order, expected)
 
 
-@settings(max_examples=200, deadline=None)
+@examples(200)
 @given(arrays(np.uint64, st.integers(0, 300), elements=st.integers(0, 2**64 - 1) | st.integers(0, 7)))
 def test_integer_keys_match_a_stable_argsort(keys):
     assert np.array_equal(radix_argsort(keys), np.argsort(keys, kind="stable"))

@@ -50,6 +50,7 @@ def records(path: Path) -> pd.DataFrame:
 # --- a second run into the same folder ------------------------------------------------------
 
 
+@pytest.mark.thorough
 def test_a_second_run_into_a_locked_folder_is_refused_in_one_line_naming_the_first(tmp_path):
     out = tmp_path / "run"
     with Output(str(out), "compare", "python -m studies.compare --seed 1"):
@@ -64,6 +65,7 @@ def test_a_second_run_into_a_locked_folder_is_refused_in_one_line_naming_the_fir
     assert third.returncode == 0, third.stderr[-2000:]
 
 
+@pytest.mark.thorough
 def test_the_lock_goes_with_a_killed_run(tmp_path):
     out = tmp_path / "run"
     holder = subprocess.Popen([sys.executable, "-c", textwrap.dedent(f"""
@@ -96,6 +98,7 @@ def finished_run(tmp_path_factory):
     return out
 
 
+@pytest.mark.thorough
 @pytest.mark.parametrize("cut", ["mid-number", "inside-quotes"])
 def test_resume_drops_a_torn_last_record_and_says_so(finished_run, tmp_path, cut):
     out = tmp_path / "run"
@@ -118,6 +121,7 @@ def test_resume_drops_a_torn_last_record_and_says_so(finished_run, tmp_path, cut
     assert set(rows.backend) == set(before.backend)
 
 
+@pytest.mark.thorough
 def test_resume_drops_a_record_torn_in_the_middle_and_measures_its_run_again(finished_run, tmp_path):
     out = tmp_path / "run"
     shutil.copytree(finished_run, out)
@@ -135,6 +139,7 @@ def test_resume_drops_a_record_torn_in_the_middle_and_measures_its_run_again(fin
     assert not rows.duplicated(["backend", "repeat", "frame"]).any()
 
 
+@pytest.mark.thorough
 def test_an_empty_partial_file_resumes_and_an_empty_results_file_is_one_line(finished_run, tmp_path):
     out = tmp_path / "run"
     out.mkdir()
@@ -210,6 +215,7 @@ def test_a_full_disk_is_one_line_exit_2_and_the_rows_written_stay_intact(tmp_pat
     assert len(done) == done.backend.nunique() * 2 * 10
 
 
+@pytest.mark.thorough
 def test_a_full_disk_for_real_on_a_small_tmpfs(tmp_path):
     if shutil.which("unshare") is None or subprocess.run(["unshare", "-rm", "true"]).returncode != 0:
         pytest.skip("no user and mount namespaces here to mount a small tmpfs in")
@@ -275,6 +281,7 @@ def test_memory_running_out_in_the_study_itself_is_one_line(tmp_path, monkeypatc
 # --- interrupted and resumed ------------------------------------------------------------------
 
 
+@pytest.mark.thorough
 def test_a_killed_run_resumes_without_losing_or_repeating_a_row_and_counts_its_whole_duration(tmp_path):
     out = tmp_path / "run"
     args = ["--n", "256", "--frames", "20", "--repeat", "3", "--backends", "own.*,essay.sap,scipy.*", "--out",

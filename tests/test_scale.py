@@ -49,6 +49,7 @@ def test_ours_against_the_engines_own_timers():
     assert (r.timed_engine, r.ours_bp, r.bp_ratio) == ("chipmunk.bbtree_index", "own.grid", 0.6 / 0.1)
 
 
+@pytest.mark.thorough
 def test_compile_times_measure_a_cold_and_a_warm_cache():
     from studies.scale import compile_times
 

@@ -7,7 +7,7 @@ import itertools
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 import engines
@@ -15,11 +15,12 @@ from interface.checks import check_positions
 from interface.pairs import is_canonical, keys
 from own import grid_incremental
 from own.brute import brute_pairs
-from own.grid import grid_box_pairs
-from own.reference import BRUTE_FORCE_LIMIT, box_pairs, circle_pairs, narrow_phase
+from own.reference import box_pairs, circle_pairs, narrow_phase
 from scenes.generate import at_essay_density
 from scenes.motion import simulate
 from strategies import sphere_scenes
+from structures import structure_pairs
+from tiers import examples
 
 
 def loop_box_pairs(positions, radii):
@@ -58,42 +59,31 @@ def test_boundary_cases_in_3d():
     apart = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 2.0 + 1e-12]])  # apart on z alone
     assert brute_pairs(touching, np.ones(2)).tolist() == [[0, 1]]
     assert brute_pairs(apart, np.ones(2)).tolist() == []
-    assert grid_box_pairs(touching, np.ones(2)).tolist() == [[0, 1]]
-    assert grid_box_pairs(apart, np.ones(2)).tolist() == []
+    assert structure_pairs("own.grid", touching, np.ones(2)).tolist() == [[0, 1]]
+    assert structure_pairs("own.grid", apart, np.ones(2)).tolist() == []
     # Boxes touch at the corner, spheres do not; spheres touching on z count.
     assert narrow_phase(touching, np.ones(2), brute_pairs(touching, np.ones(2))).tolist() == []
     on_z = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 2.0]])
     assert circle_pairs(on_z, np.ones(2)).tolist() == [[0, 1]]
 
 
-@settings(max_examples=150)
+@examples(150)
 @given(scene=sphere_scenes(max_n=40))
 def test_brute_force_in_3d_is_the_definition(scene):
     positions, radii = scene
     assert [tuple(p) for p in brute_pairs(positions, radii).tolist()] == loop_box_pairs(positions, radii)
 
 
-@settings(max_examples=200)
+@examples(200)
 @given(scene=sphere_scenes())
 def test_the_3d_grid_finds_exactly_the_box_overlaps(scene):
     positions, radii = scene
     n = len(positions)
-    np.testing.assert_array_equal(np.sort(keys(grid_box_pairs(positions, radii), n)),
+    np.testing.assert_array_equal(np.sort(keys(structure_pairs("own.grid", positions, radii), n)),
                                   keys(brute_pairs(positions, radii), n))
 
 
-def test_the_3d_reference_above_the_brute_force_limit_uses_the_grid():
-    rng = np.random.default_rng(5)
-    n = BRUTE_FORCE_LIMIT + 500
-    positions = rng.uniform(0, 400, (n, 3))
-    positions[: n // 3] = rng.normal(200, 15, (n // 3, 3))  # a dense cluster in a sparse gas
-    radii = np.exp(rng.uniform(np.log(1.0), np.log(12.0), n))
-    expected = brute_pairs(positions, radii)
-    assert len(expected) > n
-    np.testing.assert_array_equal(box_pairs(positions, radii), expected)
-
-
-@settings(max_examples=100)
+@examples(100)
 @given(scene=sphere_scenes(max_n=60))
 def test_the_narrow_phase_keeps_the_spheres_that_touch(scene):
     positions, radii = scene
@@ -114,7 +104,7 @@ def test_our_exact_backends_work_in_3d():
 
 
 @pytest.mark.parametrize("name", OWN_SPHERE_BACKENDS)
-@settings(max_examples=40)
+@examples(40)
 @given(scene=sphere_scenes(), steps=st.lists(st.sampled_from([0.0, 0.01, 0.3, 3.0, 40.0]), min_size=1, max_size=6),
        seed=st.integers(0, 2**16))
 def test_sphere_backends_find_exactly_the_box_overlaps_across_stepped_frames(name, scene, steps, seed):
@@ -225,7 +215,7 @@ def _exact_while_moving(sap, positions, radii, seed):
     ("own.sap_parallel", {"parallel_from": 0, "sweep": "plain", "strips": "off"}),
     ("own.sap_parallel", {"parallel_from": 0, "sweep": "sparse", "strips": "off"}),
 ])
-@settings(max_examples=30)
+@examples(30)
 @given(scene=sphere_scenes(), seed=st.integers(0, 2**16))
 def test_the_sparse_and_parallel_sweeps_find_exactly_the_box_overlaps_of_spheres(name, params, scene, seed):
     sap = engines.create(name, skin=0, **params)
@@ -234,7 +224,7 @@ def test_the_sparse_and_parallel_sweeps_find_exactly_the_box_overlaps_of_spheres
 
 
 @pytest.mark.parametrize("strips", ["on", "off", "auto"])
-@settings(max_examples=40)
+@examples(40)
 @given(scene=sphere_scenes(), seed=st.integers(0, 2**16))
 def test_sweep_and_prune_in_columns_finds_exactly_the_box_overlaps(strips, scene, seed):
     sap = engines.create("own.sap_incremental", strips=strips)

@@ -130,6 +130,7 @@ def test_stress_rejects_bad_options_in_one_line(tmp_path, args, message):
     assert not out.exists()  # nothing written for a run that never started
 
 
+@pytest.mark.thorough
 @pytest.mark.parametrize(("text", "message"), BAD_SCENE_FILES)
 def test_stress_rejects_bad_scene_files(tmp_path, text, message):
     bad = tmp_path / "bad.csv"

@@ -150,6 +150,7 @@ def test_quick_tune_end_to_end_writes_rows_figures_and_best(tmp_path, capsys):
     pd.testing.assert_frame_equal(pd.read_csv(out / "best.csv"), best)
 
 
+@pytest.mark.thorough
 def test_families_report_lists_every_family_and_backend(tmp_path, monkeypatch):
     # A quick run checks its few families at one size (the full run, every family at each size).
     monkeypatch.setattr(tune, "QUICK_FAMILIES", ("uniform r=10", "mixed r=1..100"))
@@ -175,6 +176,7 @@ def test_bad_options_are_one_line_errors(argv, message, capsys, tmp_path):
     assert message in err and err.count("\n") == 1
 
 
+@pytest.mark.thorough
 def test_no_thread_pool_is_forked_into_the_trials(tmp_path):
     """Our parallel kernels never run in the study's process: its children are forked from a
     worker thread, and a TBB pool started there would be in an undefined state in each (numba

@@ -77,6 +77,11 @@ def _widest_half(sizes, i, dim):
     return box
 
 
+# The pad's absolute part: halving a subnormal coordinate rounds by up to one of its ulps, which
+# no share of the coordinate covers.
+SUBNORMAL_PAD = 4 * np.finfo(float).smallest_subnormal
+
+
 def swept_circles(before: np.ndarray, after: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Circles whose boxes cover each object's box at both positions (its swept box): centred
     halfway, radius r + half the largest coordinate step, padded by a few ulps so rounding cannot
@@ -84,7 +89,7 @@ def swept_circles(before: np.ndarray, after: np.ndarray, radii: np.ndarray) -> t
     # Halves first: the sum or difference of coordinates near the largest double would overflow.
     reach = np.abs(0.5 * after - 0.5 * before).max(axis=1)
     mid = 0.5 * before + 0.5 * after
-    pad = 4 * np.finfo(float).eps * (np.abs(mid).max(axis=1) + radii + reach)
+    pad = 4 * np.finfo(float).eps * (np.abs(mid).max(axis=1) + radii + reach) + SUBNORMAL_PAD
     return mid, radii + reach + pad
 
 
@@ -96,7 +101,7 @@ def swept_boxes(before: np.ndarray, after: np.ndarray, sizes_before: np.ndarray,
     lo = np.minimum(0.5 * before - 0.5 * sizes_before, 0.5 * after - 0.5 * sizes_after)
     hi = np.maximum(0.5 * before + 0.5 * sizes_before, 0.5 * after + 0.5 * sizes_after)
     mid, half = lo + hi, hi - lo
-    return mid, half + 4 * np.finfo(float).eps * (np.abs(mid) + half)
+    return mid, half + 4 * np.finfo(float).eps * (np.abs(mid) + half) + SUBNORMAL_PAD
 
 
 def radius_of(radius, i):

@@ -63,6 +63,9 @@ LARGE_BOX_IN_MEDIANS = 1.9
 # Margin of the small-object limit, in ulps of the largest coordinate involved (a few suffice:
 # the cell index and the box bounds each round once or twice).
 ROUNDING_ULPS = 64
+# No cell narrower: a cell's inverse stays finite and well above the subnormals, where sizes of
+# 1e-300 or 5e-324 would make it infinite and a cell index NaN (an index out of bounds).
+SMALLEST_CELL = 2.0 ** -900
 # Scans of at least this many slots go LANES at a time (where `vector`). Of 1 to 8, 2 measured
 # fastest: 1.1x faster than the scalar scan on uniform scenes of 0.9 to 5.7 tests per object
 # (n = 32768), where 1 and 3 were up to 5% slower than it at the sparse end.
@@ -203,7 +206,7 @@ def grid_layout(extent, n, p, cell, max_cells, layout, slack, dim):
             if hi[a] - lo[a] > 0:
                 fallback = (hi[a] - lo[a]) / p
         for a in range(d):
-            layout[d + a] = (hi[a] - lo[a]) / p if hi[a] - lo[a] > 0 else fallback
+            layout[d + a] = max((hi[a] - lo[a]) / p if hi[a] - lo[a] > 0 else fallback, SMALLEST_CELL)
             layout[2 * d + a] = p
     else:
         c = cell
@@ -212,7 +215,7 @@ def grid_layout(extent, n, p, cell, max_cells, layout, slack, dim):
             c = (math.sqrt(spread) if d == 2 else spread ** (1.0 / d)) or 1.0
         # Room for the rounding margin of small_limit, so that objects whose diameter equals the
         # requested cell still count as small.
-        c = max(c, longest * 1e-9) + ROUNDING_ULPS * 2 * np.finfo(np.float64).eps * (far + 2 * c)
+        c = max(c, longest * 1e-9, SMALLEST_CELL) + ROUNDING_ULPS * 2 * np.finfo(np.float64).eps * (far + 2 * c)
         while True:
             cells = 1.0
             for a in range(d):
@@ -593,7 +596,8 @@ def _scan_statics(centre, r, i, s, e, s_objects, s_centres, s_radii, buf, count,
     for b in range(s, e):
         near = True
         for a in range(len(dim)):
-            near &= abs(s_centres[b, a] - centre[a]) <= r[a] + half_of(s_radii, b, a)
+            h = half_of(s_radii, b, a)
+            near &= (s_centres[b, a] - h <= centre[a] + r[a]) & (centre[a] - r[a] <= s_centres[b, a] + h)
         if near:
             emit(buf, count, i, s_objects[b])
             count += 1
@@ -1127,15 +1131,6 @@ class UniformGrid(SquareGrid):
 
     dims = (2, 3)
     shapes = ("balls", "boxes")
-
-
-def grid_box_pairs(positions: np.ndarray, radii: np.ndarray) -> np.ndarray:
-    """Every pair whose boxes overlap (closed intervals), (i, j) with i < j, in no particular order:
-    own.grid's structure at every size, circles or spheres (the exact reference past brute force)."""
-    grid = UniformGrid()
-    grid.small_scene_n = 0
-    grid.reset(positions, **size_keyword(radii))
-    return grid.pairs().copy()
 
 
 class StaticCells:

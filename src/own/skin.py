@@ -83,7 +83,9 @@ def filter_pairs(candidates, positions, radii, dim, buf):
         i, j = candidates[k, 0], candidates[k, 1]
         meet = True
         for a in range(len(dim)):
-            meet &= abs(positions[i, a] - positions[j, a]) <= half_of(radii, i, a) + half_of(radii, j, a)
+            r, s = half_of(radii, i, a), half_of(radii, j, a)
+            # The rule on the bounds themselves: a centre distance against r + s rounds otherwise.
+            meet &= (positions[j, a] - s <= positions[i, a] + r) & (positions[i, a] - r <= positions[j, a] + s)
         if meet:
             emit(buf, count, i, j)
             count += 1

@@ -277,19 +277,16 @@ def momentum(velocities: np.ndarray, radii: np.ndarray) -> np.ndarray:
 def swept_contacts(positions: np.ndarray, radii: np.ndarray) -> np.ndarray:
     """Keys of pairs whose linear paths between consecutive frames come within r_i + r_j.
 
-    Candidates come from the exact grid on circles (spheres) that cover each object's swept box; each is
-    then tested exactly at its closest approach on the segment (t in [0, 1]).
+    Candidates are the exact reference's pairs of the circles (spheres) that cover each object's
+    swept box; each is then tested exactly at its closest approach on the segment (t in [0, 1]).
     """
     from own.common import swept_circles
-    from own.grid import UniformGrid
 
     n = positions.shape[1]
     found = []
     for a, b in zip(positions[:-1], positions[1:]):
         step = b - a
-        grid = UniformGrid()
-        grid.reset(*swept_circles(a, b, radii))
-        pairs = grid.pairs()
+        pairs = box_pairs(*swept_circles(a, b, radii))
         if not len(pairs):
             continue
         i, j = pairs[:, 0], pairs[:, 1]
