@@ -29,7 +29,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .common import emit
+from .common import SMALLEST_CELL, emit
 from .large_cover import COVER_FROM, pairs_among_covered
 from .strips import LARGE_FROM_RATIO, large_size
 
@@ -77,7 +77,7 @@ def column_prepare(order, boxes, side, col_order, col_boxes):
             if reach > 0:  # else only points fit: the columns stay as wide as the widest box
                 side = min(side, 2.0 * reach * COLUMN_PAD)
     most = MAX_COLUMNS_PER_OBJECT * n + 64  # tiny boxes over a wide plane: wider columns, not a huge table
-    side = max(side, np.sqrt(du * dv / most), du / most, dv / most)
+    side = max(side, np.sqrt(du * dv / most), du / most, dv / most, SMALLEST_CELL)
     while (np.floor(du / side) + 1) * (np.floor(dv / side) + 3) > most:
         side *= 1.25
     nu, nv = int(du / side) + 1, int(dv / side) + 1

@@ -77,6 +77,11 @@ def _widest_half(sizes, i, dim):
     return box
 
 
+# No cell, strip or column narrower: its inverse, or a coordinate over it, stays finite and well
+# above the subnormals, where sizes of 1e-300 or 5e-324 would make a cell index NaN or infinite
+# (an index out of bounds).
+SMALLEST_CELL = 2.0 ** -900
+
 # The pad's absolute part: halving a subnormal coordinate rounds by up to one of its ulps, which
 # no share of the coordinate covers.
 SUBNORMAL_PAD = 4 * np.finfo(float).smallest_subnormal

@@ -34,8 +34,8 @@ from interface.base import BroadPhase, per_axis, size_keyword
 from interface.checks import shown
 from interface.knobs import Knob, mean_diameter, sizes
 
-from .common import (PairCollector, cell_of, centre_extents, copy_size, emit, half_of, halves, one_radius, radius_of,
-                     row_of, set_halves, widest_half, widest_halves)
+from .common import (SMALLEST_CELL, PairCollector, cell_of, centre_extents, copy_size, emit, half_of, halves,
+                     one_radius, radius_of, row_of, set_halves, widest_half, widest_halves)
 from .compress import NATIVE, SLACK_ROWS, scan_compressed
 from .dimension import marker
 from .grid_query import CellQueries, slot_cells
@@ -63,9 +63,6 @@ LARGE_BOX_IN_MEDIANS = 1.9
 # Margin of the small-object limit, in ulps of the largest coordinate involved (a few suffice:
 # the cell index and the box bounds each round once or twice).
 ROUNDING_ULPS = 64
-# No cell narrower: a cell's inverse stays finite and well above the subnormals, where sizes of
-# 1e-300 or 5e-324 would make it infinite and a cell index NaN (an index out of bounds).
-SMALLEST_CELL = 2.0 ** -900
 # Scans of at least this many slots go LANES at a time (where `vector`). Of 1 to 8, 2 measured
 # fastest: 1.1x faster than the scalar scan on uniform scenes of 0.9 to 5.7 tests per object
 # (n = 32768), where 1 and 3 were up to 5% slower than it at the sparse end.

@@ -28,7 +28,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .common import emit, gather, half_of
+from .common import SMALLEST_CELL, emit, gather, half_of
 from .dimension import CIRCLES
 from .large_cover import COVER_FROM, pairs_among_covered
 
@@ -90,7 +90,7 @@ def strip_plan(positions, radii, axis_mode, always, last_axis):
         return none
     # Sizes within LARGE_FROM_RATIO of each other (equal radii) cannot leave a large bucket.
     large, reach = _large_size(radii, widest) if LARGE_FROM_RATIO * narrowest <= widest else (np.inf, widest)
-    height = 2.0 * reach * WIDTH_PAD
+    height = max(2.0 * reach * WIDTH_PAD, SMALLEST_CELL)
     strips = int(o_extent / height) + 2  # one spare: the base is rounded down to a whole strip
     if strips < 3 or strips > n:
         return none
