@@ -35,6 +35,29 @@ def pytest_configure(config):
         atexit.register(shutil.rmtree, folder, ignore_errors=True)
 
 
+def pytest_sessionstart(session):
+    """Before the test workers start (this runs first, in the process that starts them): our
+    kernels compiled into numba's cache by two processes at once, each over half of our
+    backends, so that the workers load them rather than each compile every kernel again."""
+    workers = getattr(session.config.option, "numprocesses", None)
+    if os.environ.get("PYTEST_XDIST_WORKER") or not workers:
+        return
+    import subprocess
+    import sys
+
+    import engines
+
+    ours = [n for n in engines.names() if engines.of_kind(n, "own")]
+    probes = [subprocess.Popen([sys.executable, str(Path(__file__).with_name("compile_probe.py")), "--every-path",
+                                *ours[k::2]], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+              for k in range(2)]
+    for probe in probes:
+        _, err = probe.communicate()
+        # A failure here shows again, in the tests that reach the same kernel.
+        if probe.returncode:
+            print(f"warming numba's cache: {(err.strip().splitlines() or ['?'])[-1]}", file=sys.stderr)
+
+
 settings.register_profile(
     "default", deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
 )

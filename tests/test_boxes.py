@@ -651,6 +651,42 @@ def test_npz_csv_and_broadmark_files_of_boxes_give_the_same_frames_and_pairs(tmp
         assert np.array_equal(a.box_pairs[f], box_pairs(positions[f], extents[f]))
 
 
+def test_a_broadmark_recording_holds_its_initial_block_and_one_a_step(tmp_path):
+    """As Broadmark's recorder writes: the header counts F steps, the file holds 1 + F blocks (the
+    bodies as placed, then one a step); every block is a frame here, the initial one first, and a
+    file with more whole blocks than its header says is read to its end, as Broadmark's reader does."""
+    from scenes.broadmark import BOX_DTYPE, HEADER_BYTES
+
+    positions, extents = rotating_boxes(dim=3)
+    blocks, n, _ = positions.shape
+    lo, hi = (positions - extents).astype(np.float32), (positions + extents).astype(np.float32)
+    path = write_aabbs(tmp_path / "free fall.aabbs", lo, hi)
+    raw = path.read_bytes()
+    assert len(raw) == HEADER_BYTES + blocks * n * BOX_DTYPE.itemsize
+    assert np.frombuffer(raw, "<i4", 2, 256).tolist() == [n, blocks - 1]  # objects, steps
+    record = load_trajectory(path).motion
+    assert record.positions.shape == (blocks, n, 3)
+    assert np.array_equal(record.positions - record.extents, lo) and np.array_equal(record.positions + record.extents, hi)
+    # Two more whole blocks than the header says: read to the end of the file.
+    longer = tmp_path / "longer.aabbs"
+    longer.write_bytes(raw + raw[HEADER_BYTES:HEADER_BYTES + 2 * n * BOX_DTYPE.itemsize])
+    assert load_trajectory(longer).motion.positions.shape == (blocks + 2, n, 3)
+    # Ours written out reads back identically, every frame.
+    again = write_aabbs(tmp_path / "again.aabbs", record.positions - record.extents, record.positions + record.extents)
+    assert again.read_bytes()[256:] == raw[256:]
+
+
+def test_a_broadmark_file_cut_inside_a_block_names_where(tmp_path):
+    positions, extents = rotating_boxes(dim=3)
+    blocks, n, _ = positions.shape
+    raw = write_aabbs(tmp_path / "good.aabbs", positions - extents, positions + extents).read_bytes()
+    cut = tmp_path / "cut.aabbs"
+    cut.write_bytes(raw[:304 + 2 * n * 32 + 100])
+    with pytest.raises(TrajectoryFileError, match=re.escape(f"cut 100 bytes into block 3 of {n} boxes")) as err:
+        load_trajectory(cut)
+    assert "\n" not in str(err.value)
+
+
 @pytest.mark.parametrize("damage, words", [
     (lambda raw: raw[:200], "shorter than the 304-byte header"),
     (lambda raw: raw[:-8], "a truncated or foreign file"),

@@ -18,5 +18,9 @@ def test_readme_starts_with_the_main_job_and_the_test_command():
     assert "```bash" in (ROOT / "README.md").read_text().splitlines()[:4]
 
 
-def test_ci_runs_the_readme_test_command():
-    assert readme_commands()[1] in (ROOT / ".ci" / "run").read_text().splitlines()
+def test_ci_runs_the_readme_test_command_then_the_thorough_tier():
+    """The README's command is the install and the fast tier; CI runs both, then --thorough."""
+    install, tests = readme_commands()[1].rsplit(" && ", 1)
+    ci = (ROOT / ".ci" / "run").read_text().splitlines()
+    assert install in ci and tests in ci and f"{tests} --thorough" in ci
+    assert ci.index(install) < ci.index(tests) < ci.index(f"{tests} --thorough")
