@@ -282,7 +282,7 @@ def test_a_backend_over_budget_in_a_later_repeat_says_its_earlier_rows_are_kept(
 def test_input_a_real_engine_would_crash_on_is_its_outcome_and_the_study_goes_on(tmp_path):
     # coal.sap segfaults on zero radii (see test_engines): the interface refuses them, and compare
     # records the refusal as coal.sap's outcome while own.grid runs. (A crash that gets through is
-    # recorded too: test_first_hour's fake engine.)
+    # recorded too: test_inputs_and_limits' fake engine.)
     scene = tmp_path / "points.csv"
     scene.write_text("x,y,r\n0,0,0\n1,0,0\n0,0,1\n")
     out = tmp_path / "run"

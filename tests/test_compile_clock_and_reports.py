@@ -1,4 +1,4 @@
-"""The third first-hour pass: compilation apart from building, a recording measured on its own
+"""Compilation apart from building, a recording measured on its own
 frames and traits of the objects alive, one-line refusals, and output that says what ran."""
 
 from __future__ import annotations

@@ -1,4 +1,6 @@
-"""What a new user met in their first hour, each now answered or said in one line."""
+"""Inputs and limits a new user meets: scenes too large, near the largest double, files with a
+byte order mark or semicolons, text or complex input, calls out of order: each answered or said
+in one line."""
 
 from __future__ import annotations
 
