@@ -8,6 +8,7 @@ is timed apart and checked against the exact reference on the verified frame (mi
 closest hits, extra answers). The report (docs/QUERIES.md for a full run) ranks
 the backends for the pairs and for each set side by side, per family and n: a structure cheap for
 pairs may walk many cells for a long ray, a sweep answers a region by scanning its axis.
+`--scene` or `--trajectory` asks the same sets on a user's own scene or recorded frames instead.
 """
 
 from __future__ import annotations
@@ -20,19 +21,21 @@ import pandas as pd
 
 import engines
 from scenes.generate import at_essay_density
+from scenes.recorded import Recording
 
 from .lib.cli import (CliError, Parser, command_line, compact_names, in_dimension, matched_backends, run_cli,
                       warn_unavailable)
 from .lib.harness import Job
-from .lib.options import (add_backends_option, add_dim_option, add_output_options, add_quick_option, add_trial_options,
-                          dim_of, parse_checked)
+from .lib.options import (add_backends_option, add_dim_option, add_output_options, add_quick_option,
+                          add_scene_file_option, add_trial_options, dim_of, file_scene, parse_checked)
 from .lib.output import Output, read_meta, report_folder
 from .lib.pool import Pool
 from .lib.query_runs import QUERY_SETS, query_columns
 from .lib.results import COLUMNS, RowWriter, ok_lines, read_rows, summarise
 from .lib.runner import Runner
-from .scenes import _f, checked_families, checked_sizes, family_shape, known_families
+from .scenes import _f, checked_families, checked_sizes, known_families
 
+DEFAULT_SIZES = "4096,65536"
 DEFAULT_QUERIES = 1000  # a frame's queries of each set: Box2D v3's `queries` scene and Bullet's benchmark ask as many
 VERIFIED_FRAMES = (1,)  # the frame whose pairs and answers are checked against the reference (Q x n tests a set)
 SET_NAMES = tuple(s.label for s in QUERY_SETS)
@@ -44,10 +47,11 @@ def parser() -> Parser:
                    help="scene families (default: uniform, the essay's motion, and every family recorded in the "
                         "dimension)")
     add_dim_option(p)
-    p.add_argument("--sizes", default="4096,65536", metavar="N[,N]", help="object counts (default 4096,65536)")
+    p.add_argument("--sizes", metavar="N[,N]", help=f"object counts (default {DEFAULT_SIZES})")
     p.add_argument("--queries", type=int, default=DEFAULT_QUERIES, metavar="Q",
                    help=f"queries of each set a frame (default {DEFAULT_QUERIES})")
     p.add_argument("--sets", metavar="SET[,SET]", help=f"query sets (default all: {', '.join(SET_NAMES)})")
+    add_scene_file_option(p.add_argument_group("your scene or recorded frames, asked in place of the families"))
     add_backends_option(p)
     # A budget that lets a sweep finish a frame at n = 65536: its 1000 rays across the world take
     # 0.4 to 0.7 s, every set together 2.2 s, and that is what the study is there to show.
@@ -60,7 +64,19 @@ def parser() -> Parser:
 
 def parse(argv: list[str] | None):
     args = parse_checked(parser(), argv)
-    args.family_list = checked_families(args)
+    args.given = file_scene(args)  # checked before the output folder is touched
+    if args.given is not None:
+        typed = parser().parse_args(argv)  # as typed, before --quick's settings
+        if typed.families or typed.sizes:
+            raise CliError("--families and --sizes choose generated scenes; with --scene or --trajectory the file is "
+                           "the scene: drop them")
+        args.dim = args.given.dim
+        recorded = args.given.motion.frames if isinstance(args.given.motion, Recording) else None
+        if recorded is not None:  # frame 0 is the warm-up, frame 1 the verified one
+            if recorded < 2:
+                raise CliError(f"--trajectory {args.trajectory}: 1 frame, but the study times frames after a warm-up "
+                               "frame: record at least 2")
+            args.frames = min(args.frames, recorded - 1)
     if args.queries < 1:
         raise CliError(f"--queries must be at least 1, got {args.queries}")
     names = [s.strip() for s in (args.sets or ",".join(SET_NAMES)).split(",") if s.strip()]
@@ -68,7 +84,12 @@ def parse(argv: list[str] | None):
     if unknown or not names:
         raise CliError(f"--sets: unknown {', '.join(unknown) or 'none given'}; the sets are {', '.join(SET_NAMES)}")
     args.query_sets = tuple(replace(s, count=args.queries) for s in QUERY_SETS if s.label in names)
-    args.size_list = checked_sizes(args)
+    if args.given is None:
+        args.family_list = checked_families(args)
+        args.sizes = args.sizes or DEFAULT_SIZES
+        args.size_list = checked_sizes(args)
+    else:
+        args.family_list, args.size_list = [args.given.name], [args.given.n]
     return args
 
 
@@ -96,21 +117,19 @@ def main(argv: list[str] | None = None) -> int:
             raise CliError(f"--backends {args.backends}: none of them answers queries in {dim}D")
         writer = RowWriter(out.path, args.resume, columns=COLUMNS + query_columns(args.query_sets))
         runner = Runner(writer, out, pool=Pool.from_args(args))
-        full = (not args.quick and set(args.family_list) == set(known_families(dim)) and args.backends == "*"
-                and len(args.query_sets) == len(QUERY_SETS))
+        full = (not args.quick and args.given is None and set(args.family_list) == set(known_families(dim))
+                and args.backends == "*" and len(args.query_sets) == len(QUERY_SETS))
         out.meta(full=full, families=args.family_list, sizes=args.size_list, frames=args.frames, repeats=args.repeat,
                  dim=dim, queries=args.queries, sets=[s.label for s in args.query_sets], unavailable=unavailable,
                  commands=commands)
-        jobs = []
-        boxes = [f for f in args.family_list if family_shape(f) == "boxes"]
-        box_runnable = in_dimension(runnable, dim, "boxes") if boxes else []
-        for family in args.family_list:
-            for n in args.size_list:
-                scene = at_essay_density(family, n, dim=dim)
-                jobs += [Job(backend, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout,
-                             memory_mb=args.memory, scene=scene, frames=args.frames, tag={"label": family},
-                             verify=VERIFIED_FRAMES, queries=args.query_sets)
-                         for backend in (box_runnable if family in boxes else runnable)]
+        labelled = ([(args.given.name, args.given)] if args.given is not None else
+                    [(family, at_essay_density(family, n, dim=dim)) for family in args.family_list
+                     for n in args.size_list])
+        box_runnable = in_dimension(runnable, dim, "boxes")
+        jobs = [Job(backend, repeats=args.repeat, budget_s=args.budget, timeout_s=args.timeout, memory_mb=args.memory,
+                    scene=scene, frames=args.frames, tag={"label": label}, verify=VERIFIED_FRAMES,
+                    queries=args.query_sets)
+                for label, scene in labelled for backend in (box_runnable if scene.shape == "boxes" else runnable)]
         with runner:
             runner.run_all(jobs, desc="families x backends, pairs and queries")
         writer.finish()

@@ -370,13 +370,40 @@ def parse(argv: list[str] | None):
     return args
 
 
+class TimeLimit:
+    """--time-limit, kept on the trials and tuning: the set-up they need (stepping the scene and its
+    exact pairs, compiling our kernels, in this process or in a trial's child before its clock
+    starts) is timed, reported apart, and moves every deadline on by as much."""
+
+    def __init__(self, limit: float) -> None:
+        self.start, self.limit = time.perf_counter(), limit
+        self.setup_s = 0.0  # set aside so far
+        self.compile_s = 0.0  # of it, compiling
+
+    def deadline(self, share: float = 1.0) -> float:
+        """When `share` of the limit (less the report's time) is spent on trials and tuning."""
+        return self.start + self.setup_s + share * (self.limit - REPORT_S)
+
+    def set_aside(self, seconds: float, compiling: bool = False) -> None:
+        self.setup_s += seconds
+        self.compile_s += seconds if compiling else 0.0
+
+    def words(self) -> str:
+        """How the run's time went, against the limit and apart from it."""
+        took = time.perf_counter() - self.start
+        return (f"{took:.0f} s: {took - self.setup_s:.0f} s of trials, tuning and report within the time limit of "
+                f"{self.limit:g} s; {self.setup_s:.0f} s of set-up apart: compiling {self.compile_s:.0f} s, stepping "
+                f"the scene and its exact pairs {self.setup_s - self.compile_s:.0f} s")
+
+
 class Trials:
     """recommend's trials on one scene: jobs of the runner, each given its share of the time left
-    (at most --timeout) and stopped past a budget."""
+    (at most --timeout) and stopped past a budget; none starts once the time is spent."""
 
-    def __init__(self, runner: Runner, scene, frames: int, repeats: int, deadline: float, args,
+    def __init__(self, runner: Runner, scene, frames: int, repeats: int, clock: TimeLimit, share: float, args,
                  verify: tuple[int, ...] | None = None) -> None:
-        self.runner, self.scene, self.frames, self.repeats, self.deadline = runner, scene, frames, repeats, deadline
+        self.runner, self.scene, self.frames, self.repeats = runner, scene, frames, repeats
+        self.clock, self.share = clock, share  # its deadline: that share of the time limit spent
         self.verify = verify
         self.max_error = args.max_error
         self.timeout_cap = args.timeout or 120.0
@@ -392,9 +419,18 @@ class Trials:
                    timeout_s=timeout, scene=self.scene, frames=frames, tag={"experiment": step}, verify=verify,
                    queries=self.queries)
 
+    @property
+    def deadline(self) -> float:
+        return self.clock.deadline(self.share)
+
     def run(self, job: Job) -> Trial:
-        """One trial; it may use twice its fair share of the time left."""
-        trial = Trial.of(job, self.runner.run(job))
+        """One trial; it may use twice its fair share of the time left. Its child's compiling is
+        set-up, set aside from the time limit."""
+        if time.perf_counter() >= self.deadline:
+            return Trial(job.backend, dict(job.params), "stopped: the time limit ran out before it started")
+        outcome = self.runner.run(job)
+        self.clock.set_aside(max((r.get("t_compile_s") or 0.0 for r in outcome.rows), default=0.0), compiling=True)
+        trial = Trial.of(job, outcome)
         if trial.status.startswith("timeout"):
             trial.status = f"stopped: not done within its {job.timeout_s:.0f} s share of the time limit"
         return trial
@@ -444,35 +480,37 @@ def main(argv: list[str] | None = None) -> int:
     with Output(args.out, "recommend", command_line("recommend", argv), args.resume) as out:
         missing = warn_unavailable(chosen)
         backends = run_order(answering([b for b in chosen if b not in missing], args.query_sets))
-        start = time.perf_counter()
-        deadline = start + args.time_limit - REPORT_S
+        clock = TimeLimit(args.time_limit)
         # The trials leave TUNE_SHARE of the time to tuning, which can still change the winner.
-        trials_deadline = deadline if args.no_tune else start + (1 - TUNE_SHARE) * (args.time_limit - REPORT_S)
+        trials_share = 1.0 if args.no_tune else 1.0 - TUNE_SHARE
         writer = RowWriter(out.path, args.resume, columns=COLUMNS + query_columns(args.query_sets))
         runner = Runner(writer, out, pool=Pool.from_args(args))
         frames, repeats, notes, verify = plan_trials(runner, scene, args, len(backends))
         if args.query_sets:
             notes.append(f"Each frame asks {asked_words(args.query_sets)} after its pairs; the whole frame is timed.")
         traj = runner.trajectory(scene, frames + 1, verify)
+        clock.set_aside(time.perf_counter() - clock.start)  # the scene stepped and its exact pairs
         traits = measure_traits(traj)
         print(f"scene {scene.name}: {', '.join(traits.words())}")
         for note in notes:
             print(note, flush=True)
-        trials = Trials(runner, scene, frames, repeats, trials_deadline, args, verify)
+        trials = Trials(runner, scene, frames, repeats, clock, trials_share, args, verify)
         entries: list[Entry] = []
         skipped: list[str] = []
         for k, backend in enumerate(backends):
-            if time.perf_counter() > trials_deadline:
+            if time.perf_counter() > trials.deadline:
                 skipped.append(backend)
                 continue
-            warm_up(backend, scene.dim)
+            compiling = time.perf_counter()
+            warm_up(backend, scene.dim, {q.kind for q in args.query_sets})
+            clock.set_aside(time.perf_counter() - compiling, compiling=True)
             best = min((e.trial.median_ms for e in entries if e.eligible), default=float("inf"))
             entries.append(trials.sized(backend, budget=max(0.05, HOPELESS * best / 1e3), share=len(backends) - k))
             t = entries[-1].trial
             print(f"  {backend:20} {t.median_ms:10.3f} ms" + (f" ({t.frames} frames)" if t.frames < frames else "")
                   if t.ok else f"  {backend:20} {t.status}", flush=True)
         if not args.no_tune:
-            tune(entries, trials, deadline)
+            tune(entries, trials)
         writer.finish()
         if skipped:
             notes.append(f"Not tried, the time limit of {args.time_limit:g} s ran out: {', '.join(skipped)}.")
@@ -486,7 +524,7 @@ def main(argv: list[str] | None = None) -> int:
                                   "defaults_job": e.defaults.key if e.defaults else None,
                                   "inexact_job": e.inexact.key if e.inexact else None} for e in entries])
     finish(out.path, entries, meta, Traits(**meta["traits"]))
-    print(f"({time.perf_counter() - start:.0f} s)")
+    print(f"({clock.words()})")
     return 0
 
 
@@ -591,9 +629,9 @@ def fastest_inexact(found, max_error: float) -> Trial | None:
     return min(points, key=lambda t: t.median_ms, default=None)
 
 
-def tune(entries: list[Entry], trials: Trials, deadline: float) -> None:
+def tune(entries: list[Entry], trials: Trials) -> None:
     """Tune the backends with knobs that could still win, then re-measure the tuned setting."""
-    trials.deadline = deadline  # the time the trials left is tuning's
+    trials.share = 1.0  # the time the trials left is tuning's
     eligible = sorted((e for e in entries if e.eligible and tunable([e.backend], trials.scene.dim)),
                       key=lambda e: e.trial.median_ms)
     leader = min((e.trial.median_ms for e in entries if e.eligible), default=float("inf"))
@@ -601,7 +639,7 @@ def tune(entries: list[Entry], trials: Trials, deadline: float) -> None:
         if e.trial.median_ms > TUNE_WITHIN * leader:
             e.note = f"not tuned: default over {TUNE_WITHIN:g}x the leader"
             continue
-        if time.perf_counter() > deadline:
+        if time.perf_counter() > trials.deadline:
             e.note = "not tuned: time limit"
             continue
 
@@ -618,7 +656,7 @@ def tune(entries: list[Entry], trials: Trials, deadline: float) -> None:
         if not found.params or same:
             e.note = "defaults were best" if found.params else "tuning found no better setting"
             continue
-        if time.perf_counter() > deadline:
+        if time.perf_counter() > trials.deadline:
             e.note = "tuned, but the time limit came before its setting was measured again"
             continue
         job = trials.job(e.backend, found.params, "tuned")

@@ -93,3 +93,47 @@ def test_rays_are_checked_where_they_start_outside_for_an_engine_with_its_own_ru
     origins = np.array([[0.5, 0.0], [3.0, 0.0], [10.0, 1.9], [1.0, 0.0]])
     assert starting_outside(origins, positions, radii, None).tolist() == [False, True, False, False]
     assert starting_outside(origins, positions, radii, np.array([False, True])).tolist() == [True, True, False, True]
+
+
+def _falling_boxes(frames: int = 4, n: int = 120) -> tuple[np.ndarray, np.ndarray]:
+    """(positions (frames, n, 3), half-extents (n, 3)) of boxes on a lattice, falling."""
+    rng = np.random.default_rng(3)
+    k = np.arange(n)
+    lattice = np.column_stack([k % 5, (k // 5) % 5, k // 25]).astype(float) * 3.0
+    positions = np.stack([lattice + rng.normal(0, 0.1, lattice.shape) - [0, 0, 0.2 * f] for f in range(frames)])
+    return positions, rng.uniform(0.8, 1.6, (n, 3))
+
+
+@pytest.mark.parametrize("form", ["npz", "csv", "aabbs"])
+def test_the_study_asks_its_sets_on_a_user_s_recording(form, tmp_path, capsys):
+    positions, halves = _falling_boxes()
+    frames, n, _ = positions.shape
+    path = tmp_path / f"falling.{form}"
+    if form == "npz":
+        np.savez(path, positions=positions, extents=halves)
+    elif form == "csv":
+        rows = [f"{f},{k},{x},{y},{z},{hx},{hy},{hz}" for f in range(frames) for k in range(n)
+                for (x, y, z), (hx, hy, hz) in [(positions[f, k], halves[k])]]
+        path.write_text("frame,id,x,y,z,hx,hy,hz\n" + "\n".join(rows) + "\n")
+    else:
+        from scenes.broadmark import write_aabbs
+        write_aabbs(path, positions - halves, positions + halves, name="falling")
+    out = tmp_path / "queries"
+    assert queries_study.main(["--trajectory", str(path), "--queries", "30", "--backends", "own.grid,own.bvh",
+                               "--out", str(out)]) == 0
+    rows = pd.read_csv(out / "results.csv")
+    assert set(rows.backend) == {"own.grid", "own.bvh"} and set(rows.label) == {"falling"} and set(rows.n) == {n}
+    assert rows.frame.max() == frames - 1  # every frame the file has after the warm-up
+    verified = rows[rows.frame == 1]
+    for s in QUERY_SETS:
+        assert (verified[f"{s.label}_missed"] == 0).all() and (verified[f"{s.label}_wrong"] == 0).all()
+    assert "## falling, n = 120" in (out / "QUERIES.md").read_text()
+
+
+def test_a_recording_takes_no_families_or_sizes(tmp_path, capsys):
+    positions, halves = _falling_boxes(frames=2)
+    path = tmp_path / "falling.npz"
+    np.savez(path, positions=positions, extents=halves)
+    code = run_cli("queries", queries_study.main, ["--trajectory", str(path), "--sizes", "400",
+                                                   "--out", str(tmp_path / "q")])
+    assert code == 2 and "with --scene or --trajectory the file is the scene" in capsys.readouterr().err

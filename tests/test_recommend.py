@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-import time
+import re
 
 import pandas as pd
 
@@ -112,7 +112,8 @@ def test_every_backend_has_a_place_in_the_run_order():
 
 def test_trials_get_their_repeats_before_more_frames():
     trials = recommend.Trials.__new__(recommend.Trials)
-    trials.frames, trials.repeats, trials.deadline = 20, 3, time.perf_counter() + 60
+    trials.frames, trials.repeats = 20, 3
+    trials.clock, trials.share = recommend.TimeLimit(60 + recommend.REPORT_S), 1.0  # 60 s left
     probe = Trial("own.grid", {}, "ok", 0.05, 0.05, 0.05, setup_s=0.3)
     # A fast backend: its probe job took 0.4 s, nearly all of it fixed cost; 6 s of room.
     assert trials.trial_size(probe, 0.4, share=20) == (20, 3)
@@ -137,6 +138,11 @@ def test_the_time_limit_stops_trying_and_says_so(tmp_path, capsys):
                            "--frames", "2", "--repeat", "2", "--out", str(tmp_path)]) == 0
     printed = capsys.readouterr().out
     assert "Not tried, the time limit of 3.5 s ran out" in printed
+    # The limit is kept on the trials; compiling and the scene's exact pairs are set-up, said apart.
+    within = re.search(r"(\d+) s of trials, tuning and report within the time limit of 3.5 s; (\d+) s of set-up apart: "
+                       r"compiling \d+ s, stepping the scene and its exact pairs \d+ s", printed)
+    assert within, printed[-500:]
+    assert int(within.group(1)) <= 3.5 + 5  # a trial started before the limit may end a little after it
 
 
 def test_bad_input_is_a_one_line_error(tmp_path, capsys):

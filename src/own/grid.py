@@ -60,6 +60,10 @@ LARGE_RADIUS_IN_MEDIANS = 4.0
 # at n = 4096 (grid ms a frame, 4 medians -> 1.9): brick wall 1.75 -> 1.07 (the cube had set
 # cells of 32), debris 1.35 -> 1.04; walls, pyramid and beams the same within noise.
 LARGE_BOX_IN_MEDIANS = 1.9
+# own.grid's cells are sized anew once the large bucket holds this share of the movers (and twice
+# what it held at the layout), with this much room to grow on (SquareGrid._fit_cells).
+LARGE_SHARE_TO_RESIZE = 0.25
+RESIZE_ROOM = 1.25
 # Margin of the small-object limit, in ulps of the largest coordinate involved (a few suffice:
 # the cell index and the box bounds each round once or twice).
 ROUNDING_ULPS = 64
@@ -1002,9 +1006,17 @@ class SquareGrid(StaticsQueried, CellLayout):
         self._input_order = held.copy()
         self._start = np.zeros(0, dtype=np.int64)
         self._repair = False
-        self._update(positions)
+        self._sort(positions)
+        key = self._large_key()
+        self._large_at_layout = int(self._start[key + 1] - self._start[key])  # for _fit_cells
 
     def _update(self, positions):
+        self._sort(positions)
+        if len(self.spawned):
+            self._fit_cells(positions)
+
+    def _sort(self, positions):
+        """This frame's slots in their cells (grid_update)."""
         self._positions = positions
         ids, centres, key, sradii = self._slots
         if len(self.spawned) or len(self.removed):
@@ -1029,13 +1041,36 @@ class SquareGrid(StaticsQueried, CellLayout):
 
     def _reshape(self, positions):
         """Boxes took new extents (bodies rotated): the slots take them in place and the frame is
-        an update as any other (a box grown past a cell changes key, to the large bucket); the
-        statics never change theirs (the interface checks), so their grid stays."""
+        an update as any other (a box grown past a cell changes key, to the large bucket), unless
+        the cells no longer fit the movers (_fit_cells); the statics never change their extents
+        (the interface checks)."""
         self.radii = self._all_radii
         self._live_radii = live_sizes(self.radii, self.alive)
         ids, _, _, sradii = self._slots
         gather_rows(self._live_radii, ids, sradii, self._dim)  # in place, by column (np.take there: 3.5x slower)
-        self._update(positions)
+        self._sort(positions)
+        self._fit_cells(positions)
+
+    def _fit_cells(self, positions):
+        """Cells sized anew where the movers outgrew them (boxes that turned, objects that came):
+        once the large bucket holds over LARGE_SHARE_TO_RESIZE of the movers and twice what it
+        held at the layout. Cubes laid out aligned and then tumbling grow up to sqrt(3); with the
+        first frame's cells 3589 to 3896 of 4000 ended in the bucket. The new cells leave
+        RESIZE_ROOM to grow on. Called on the frames that change sizes only: a plain update pays
+        nothing."""
+        held = len(self._slots[0])
+        if self.params["cell"] is not None or self._p or not held:
+            return
+        key = self._large_key()
+        large = int(self._start[key + 1] - self._start[key])
+        if large <= LARGE_SHARE_TO_RESIZE * held or large <= 2 * self._large_at_layout:
+            return
+        self._cell = RESIZE_ROOM * default_cell(self._live_radii[self._slots[0]])
+        self._layout[2 * self.dim] = 0.0  # laid out anew by the update (grid_layout)
+        self._build_statics(positions)  # their cells are at least the movers'
+        self._sort(positions)
+        key = self._large_key()
+        self._large_at_layout = int(self._start[key + 1] - self._start[key])
 
     def _build_statics(self, positions: np.ndarray) -> None:
         """The statics alive in a grid of their own (cells at least this grid's), or None."""

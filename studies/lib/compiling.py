@@ -6,12 +6,14 @@ Without it a backend's first build in a fresh cache paid its compilation (own.gr
 warm-up runs the backend on small scenes that take its structured path: a sample of the job's own
 first frames (its radii or boxes, statics and spawning; boxes turning) and uniform moving scenes
 with equal and with mixed radii, each for a few frames, so that its build, update and pair kernels
-all compile.
+all compile, and then asked each kind of query the job asks, so that the query kernels compile
+there too rather than inside a timed frame.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
@@ -22,6 +24,7 @@ from interface.base import size_keyword
 
 WARM_N = 256  # objects: past every small-scene path of ours (own/small.py: 64), well under a ms a frame
 WARM_FRAMES = 3
+WARM_QUERIES = 16  # of each kind asked
 
 
 class CompileClock(event.Listener):
@@ -98,10 +101,28 @@ def sample_of(positions: np.ndarray, sizes: np.ndarray, static, alive) -> tuple:
             None if static is None else static[pick], None if alive is None else alive[pick])
 
 
-def warm_up(backend: str, params: dict[str, Any], dim: int, sample: tuple | None = None) -> float:
-    """Compile (or load) `backend(**params)`'s kernels for `dim` on the warm-up scenes; returns
-    the seconds it took (0 for a backend that compiles nothing). Any error is left for the timed
-    run to meet and report: the warm-up only prepares it."""
+def ask_each(backend, kinds: Iterable[str], positions: np.ndarray) -> None:
+    """A few queries of each kind in `kinds` ("rays", "boxes", "points") the backend answers,
+    over the box of `positions`: their kernels compile at the first call."""
+    rng = np.random.default_rng(2)
+    lo, hi = positions.min(axis=0), positions.max(axis=0)
+    where = rng.uniform(lo, hi, (WARM_QUERIES, positions.shape[1]))
+    span = max(float(np.linalg.norm(hi - lo)), 1.0)
+    for kind in set(kinds) & set(backend.answers):
+        if kind == "rays":
+            backend.raycast(where, rng.normal(size=where.shape), np.full(len(where), 0.25 * span))
+        elif kind == "boxes":
+            backend.query_boxes(where - 0.05 * span, where + 0.05 * span)
+        else:
+            backend.query_points(where)
+
+
+def warm_up(backend: str, params: dict[str, Any], dim: int, sample: tuple | None = None,
+            queries: Iterable[str] = ()) -> float:
+    """Compile (or load) `backend(**params)`'s kernels for `dim` on the warm-up scenes, and those
+    of the `queries` kinds it is asked; returns the seconds it took (0 for a backend that
+    compiles nothing). Any error is left for the timed run to meet and report: the warm-up only
+    prepares it."""
     if not compiles(backend):
         return 0.0
     start = time.perf_counter()
@@ -115,6 +136,8 @@ def warm_up(backend: str, params: dict[str, Any], dim: int, sample: tuple | None
                 for moved, now_alive, extents in _frames(positions, sizes, static, alive, rng):
                     b.update(moved, now_alive, extents=extents)
                     b.pairs()
+                if queries:
+                    ask_each(b, queries, positions)
             finally:
                 b.close()
         except Exception:  # noqa: BLE001 - the timed run reports it, with its own context

@@ -275,7 +275,8 @@ def _child(job: Job, traj: Trajectory, conn, parent_pid: int, scratch: str) -> N
         with CompileClock() as clock:
             # Before the job's clock starts (the parent's limits count from "compiled").
             sample = sample_of(traj.positions[0], traj.sizes_at(0), traj.scene.static, traj.alive_at(0))
-            compiled_s = warm_up(job.backend, job.params, traj.scene.dim, sample)
+            compiled_s = warm_up(job.backend, job.params, traj.scene.dim, sample,
+                                 queries={q.kind for q in job.queries or ()})
             conn.send(("compiled", None))
             for r in range(job.repeats):
                 rows = measure(job, traj, r, (lambda: conn.send(("ready", None))) if r == 0 else None, clock,

@@ -11,6 +11,7 @@ the default best by their median frame, at 1.2x the default's mean).
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -99,12 +100,12 @@ def run_trial(runner: Runner, scene: Scene, backend: str, params: dict[str, Any]
     return Trial.of(job, runner.run(job))
 
 
-def warm_up(backend: str, dim: int) -> None:
+def warm_up(backend: str, dim: int, queries: Iterable[str] = ()) -> None:
     """Compile our numba backends once in this process (compiling.warm_up: scenes that take their
-    structured path), so forked trials inherit the machine code instead of each loading it from
-    the cache. Engines are not touched here: one that crashes must crash in a child, not in the
+    structured path, and asked the `queries` kinds), so forked trials inherit the machine code
+    instead of each loading it from the cache. Engines are not touched here: one that crashes must crash in a child, not in the
     study. Nor are our parallel kernels: running one here starts numba's thread pool (TBB) in this
     process, and the children are forked from a worker thread, where TBB's state is undefined in
     the child; each child compiles or loads them before its clock starts."""
     if engines.ours_on_one_thread(backend):
-        compiling.warm_up(backend, {}, dim)
+        compiling.warm_up(backend, {}, dim, queries=queries)
