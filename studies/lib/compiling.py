@@ -21,6 +21,8 @@ from numba.core import event
 
 import engines
 from interface.base import size_keyword
+from interface.queries import check_rays
+from own.query_reference import boxes_meeting, closest_hits, points_inside
 
 WARM_N = 256  # objects: past every small-scene path of ours (own/small.py: 64), well under a ms a frame
 WARM_FRAMES = 3
@@ -117,15 +119,37 @@ def ask_each(backend, kinds: Iterable[str], positions: np.ndarray) -> None:
             backend.query_points(where)
 
 
+def check_each(kinds: Iterable[str], positions: np.ndarray, sizes: np.ndarray) -> None:
+    """The exact answer to a few queries of each kind, so that the reference's kernels, which
+    check every backend's answers (engines' too) on a verified frame, compile here, not within a
+    job's time limit."""
+    rng = np.random.default_rng(3)
+    lo, hi = positions.min(axis=0), positions.max(axis=0)
+    where = rng.uniform(lo, hi, (WARM_QUERIES, positions.shape[1]))
+    kinds = set(kinds)
+    if "rays" in kinds:
+        closest_hits(*check_rays(where, rng.normal(size=where.shape), np.ones(len(where)), positions.shape[1]),
+                     positions, sizes)
+    if "boxes" in kinds:
+        boxes_meeting(where - 1.0, where + 1.0, positions, sizes)
+    if kinds:  # points: and rays, whose origins inside an object are told apart (query_runs.starting_outside)
+        points_inside(where, positions, sizes)
+
+
 def warm_up(backend: str, params: dict[str, Any], dim: int, sample: tuple | None = None,
             queries: Iterable[str] = ()) -> float:
     """Compile (or load) `backend(**params)`'s kernels for `dim` on the warm-up scenes, and those
-    of the `queries` kinds it is asked; returns the seconds it took (0 for a backend that
-    compiles nothing). Any error is left for the timed run to meet and report: the warm-up only
-    prepares it."""
-    if not compiles(backend):
+    of the `queries` kinds it is asked (and of their exact answer, for any backend); returns the
+    seconds it took (0 for an engine without queries). Any error is left for the timed run to
+    meet and report: the warm-up only prepares it."""
+    checked = bool(queries) and sample is not None and len(sample[0]) > 0
+    if not checked and not compiles(backend):
         return 0.0
     start = time.perf_counter()
+    if checked:
+        check_each(queries, sample[0], sample[1])
+    if not compiles(backend):
+        return time.perf_counter() - start
     rng = np.random.default_rng(1)
     for positions, sizes, static, alive in warm_scenes(dim, sample):
         try:
