@@ -83,12 +83,12 @@ def run_case(name: str, case: Case, dim: int, conn) -> None:
         conn.close()
 
 
-def outcome(name: str, case: Case, dim: int) -> list:
-    """["pairs", pairs per frame, reports], ["error", type, message], ["hang"] or ["crash", exit
-    status] of one backend on one case, in a forked child."""
+def outcome_of(target, *args) -> list:
+    """What `target(*args, conn)` sends from a forked child (["pairs", ...], ["error", type,
+    message]), or ["hang"] past the time limit, or ["crash", exit status]."""
     ctx = mp.get_context("fork")
     parent, child = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=run_case, args=(name, case, dim, child), daemon=True)
+    proc = ctx.Process(target=target, args=(*args, child), daemon=True)
     proc.start()
     child.close()
     if not parent.poll(TIME_LIMIT_S):
@@ -102,6 +102,12 @@ def outcome(name: str, case: Case, dim: int) -> list:
         return ["crash", proc.exitcode]
     proc.join(timeout=10)
     return message
+
+
+def outcome(name: str, case: Case, dim: int) -> list:
+    """["pairs", pairs per frame, reports], ["error", type, message], ["hang"] or ["crash", exit
+    status] of one backend on one case."""
+    return outcome_of(run_case, name, case, dim)
 
 
 def available_in(dim: int) -> list[str]:

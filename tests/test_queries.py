@@ -10,13 +10,68 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import engines
-from interface.queries import check_rays
+from interface.queries import QUERIES, check_points, check_query_boxes, check_rays
 from own.query_reference import boxes_meeting, closest_hits, every_ray_hit, points_inside
 from studies.lib.query_runs import SAME_HIT_SHARE, starting_outside
+from test_boxes import touching_exactly
 from tiers import examples
 
 ENGINE_HIT_SHARE = 1e-3
 ANSWERING = [n for n in engines.available() if engines.backend_class(n).answers]
+
+
+def meets_within_rounding(eps: float):
+    """A limit of an engine that meets shapes in its own floats (float32, or a double's
+    rounding at a ray's far origin): some answer of the exact rule meets its box only within 16
+    units of `eps` at the scene's and the queries' magnitude (a face shared with the query, a
+    ray along an edge, a box thinner than that), where the engine's rounding may lose it."""
+    def applies(positions, sizes, kind, query) -> bool:
+        if sizes.ndim != 2 or not len(positions):
+            return False  # balls: their engines' answers are exact to their tolerance in the contract tests
+        dim = positions.shape[1]
+        if kind == "rays":
+            o, u, lengths = check_rays(*query, dim)
+            with np.errstate(over="ignore"):
+                magnitude = np.abs(np.vstack([o, o + u * lengths[:, None]])).max()
+        else:
+            magnitude = max(np.abs(np.asarray(q, dtype=np.float64)).max() for q in
+                            (query if kind == "boxes" else (query,)))
+        tol = 16 * eps * max(magnitude, float(np.abs(positions).max() + sizes.max()))
+        if (sizes.min(axis=1) <= tol).any():
+            return True
+        answers = {"rays": lambda s: every_ray_hit(o, u, lengths, positions, s),
+                   "boxes": lambda s: boxes_meeting(*check_query_boxes(*query, dim), positions, s),
+                   "points": lambda s: points_inside(check_points(query, dim), positions, s)}[kind]
+        return len(answers(sizes)) > len(answers(sizes - tol))
+    return applies
+
+
+FLOAT32 = float(np.finfo(np.float32).eps)
+# Engine -> (query kind, the scenes and queries it mishandles on that kind): each shown by
+# test_an_engine_misses_queries_where_its_limits_say (test_adversarial_boxes_and_queries.py).
+QUERY_LIMITATIONS: dict[str, list] = {
+    **{name: [(kind, meets_within_rounding(FLOAT32)) for kind in kinds]
+       for name, kinds in [("box2d.v3", QUERIES), ("rapier.bvh", ("rays", "points")), ("bullet.dbvt", ("rays",)),
+                           ("bullet.simple", ("rays",))]},
+    "mujoco.sap": [("rays", meets_within_rounding(float(np.finfo(np.float64).eps)))],
+}
+
+
+def touching_boxes(positions, sizes, kind, query) -> bool:
+    """Box2D v3 after a step on boxes that touch exactly (its solver pushed them apart; the
+    frame's transforms go back in before the query): its ray cast misses hits the rule has."""
+    return sizes.ndim == 2 and touching_exactly(positions, sizes)
+
+
+def boxes_under_a_tenth(positions, sizes, kind, query) -> bool:
+    """Bullet's ray test on boxes under 0.1 across (its box shapes keep a collision margin):
+    hits up to 2e-3 off, a tile's corner passed."""
+    return sizes.ndim == 2 and bool(len(sizes)) and float(sizes.min()) < 0.05 + 1e-12
+
+
+QUERY_LIMITATIONS["box2d.v3"].append(("rays", touching_boxes))
+for _name in ("bullet.dbvt", "bullet.simple"):
+    QUERY_LIMITATIONS[_name].append(("rays", boxes_under_a_tenth))
 
 
 def ray(origin, direction, length):
@@ -140,29 +195,76 @@ def test_the_reference_rays_agree_with_independent_geometry(dim, data):
             assert nearer[0][0] == k  # cut at t, the ray still hits k first
 
 
-def assert_closest_hits(cls, hit, t, want_hit, want_t, lengths):
+def closest_hit_problem(cls, hit, t, want_hit, want_t, lengths) -> str | None:
     """Ours: the reference's bit for bit. An engine's (its own arithmetic, float32 or the circle
     taken from its box): a hit wherever the reference has one, on the same object or one as close
     (within SAME_HIT_SHARE of the ray's length, the study's rule), its distance within
     ENGINE_HIT_SHARE of the length (Bullet's convex cast converges to about 1e-4 of it)."""
+    hit, t = np.asarray(hit), np.asarray(t, dtype=np.float64)
     if cls.exact:
-        assert np.array_equal(hit, want_hit) and np.array_equal(t, want_t)
-        return
-    assert np.array_equal(hit >= 0, want_hit >= 0), "an engine missed a hit, or hit nothing there"
+        same = np.array_equal(hit, want_hit) and np.array_equal(t, want_t)
+        return None if same else f"closest hits differ from the reference on {int((hit != want_hit).sum())} rays"
+    if not np.array_equal(hit >= 0, want_hit >= 0):
+        return f"missed a hit or hit nothing there on {int(((hit >= 0) != (want_hit >= 0)).sum())} rays"
     hits = want_hit >= 0
     share = np.abs(t[hits] - want_t[hits]) / np.maximum(lengths[hits], 1.0)
-    assert np.all((share <= SAME_HIT_SHARE) | (hit[hits] == want_hit[hits])), "an engine hit a farther object"
-    assert np.all(share <= ENGINE_HIT_SHARE), f"an engine's hit {share.max():.2g} of the ray's length off"
+    if not np.all((share <= SAME_HIT_SHARE) | (hit[hits] == want_hit[hits])):
+        return "hit a farther object"
+    if not np.all(share <= ENGINE_HIT_SHARE):
+        return f"a hit {share.max():.2g} of the ray's length off"
+    return None
+
+
+def assert_closest_hits(cls, hit, t, want_hit, want_t, lengths):
+    problem = closest_hit_problem(cls, hit, t, want_hit, want_t, lengths)
+    assert problem is None, f"{cls.name}: {problem}"
+
+
+def met_problem(cls, got, want) -> str | None:
+    """Ours: the reference's (query, object) rows. An engine's: every one of them, and maybe more
+    (its fat boxes or its cells: candidates, as its pairs are)."""
+    got, want = np.asarray(got).reshape(-1, 2), np.asarray(want).reshape(-1, 2)
+    if cls.exact:
+        return None if got.tolist() == want.tolist() else f"{len(got)} answers, the reference {len(want)}"
+    missed = set(map(tuple, want.tolist())) - set(map(tuple, got.tolist()))
+    return f"missed {len(missed)} answers, e.g. {sorted(missed)[:3]}" if missed else None
 
 
 def assert_met(cls, got, want):
-    """Ours: the reference's (query, object) rows. An engine's: every one of them, and maybe more
-    (its fat boxes or its cells: candidates, as its pairs are)."""
-    if cls.exact:
-        assert got.tolist() == want.tolist()
-        return
-    missed = set(map(tuple, want.tolist())) - set(map(tuple, got.tolist()))
-    assert not missed, f"{cls.name} missed {len(missed)} answers, e.g. {sorted(missed)[:3]}"
+    problem = met_problem(cls, got, want)
+    assert problem is None, f"{cls.name}: {problem}"
+
+
+def declared_queries(name: str, positions, sizes, asked: dict) -> set[str]:
+    """The query kinds of `asked` (kind -> its arguments) whose misses QUERY_LIMITATIONS declares."""
+    return {kind for kind, applies in QUERY_LIMITATIONS.get(name, [])
+            if asked.get(kind) is not None and len(asked[kind]) and applies(positions, sizes, kind, asked[kind])}
+
+
+def query_problems(name: str, positions, sizes, found: dict, rays=(), boxes=(), points=None,
+                   honour_limits: bool = True) -> list[str]:
+    """What a backend's answers in `found` ("closest", "rays", "boxes", "points") get wrong
+    against the reference, leaving out what QUERY_LIMITATIONS declares for it (unless not
+    `honour_limits`: the evidence that a declared limit is real)."""
+    cls, dim, problems = engines.backend_class(name), positions.shape[1], []
+    asked = {"rays": rays, "boxes": boxes, "points": points}
+    declared = declared_queries(name, positions, sizes, asked) if honour_limits else set()
+    if "closest" in found and "rays" not in declared:
+        o, u, lengths = check_rays(*rays, dim)
+        checked = np.ones(len(o), dtype=bool) if cls.rays_from_inside else starting_outside(o, positions, sizes, None)
+        hit, t = closest_hits(o, u, lengths, positions, sizes)
+        got_hit, got_t = (np.asarray(v) for v in found["closest"])
+        problems.append(closest_hit_problem(cls, got_hit[checked], got_t[checked], hit[checked], t[checked],
+                                            lengths[checked]))
+        every, want = np.array(found["rays"], dtype=np.int64).reshape(-1, 2), every_ray_hit(o, u, lengths, positions,
+                                                                                             sizes)
+        problems.append(met_problem(cls, every[checked[every[:, 0]]], want[checked[want[:, 0]]]))
+    if "boxes" in found and "boxes" not in declared:
+        problems.append(met_problem(cls, found["boxes"], boxes_meeting(*check_query_boxes(*boxes, dim), positions,
+                                                                        sizes)))
+    if "points" in found and "points" not in declared:
+        problems.append(met_problem(cls, found["points"], points_inside(check_points(points, dim), positions, sizes)))
+    return [p for p in problems if p]
 
 
 def random_scene(rng, n, dim, boxes):

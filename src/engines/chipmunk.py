@@ -51,6 +51,21 @@ class HashCellGuard:
         if problem:
             raise ValueError(f"{self.name}: {problem} (Chipmunk's spatial hash; `dim` sets the cell)")
 
+    def _check_ray_cells(self, origins: np.ndarray, directions: np.ndarray, lengths: np.ndarray) -> None:
+        """Its segment query walks every cell along a ray in int cell indices, as a box's: a ray
+        from 1e15 outside, or 1e300 long, walked for minutes without an answer."""
+        with np.errstate(over="ignore", invalid="ignore"):
+            ends = origins + directions * lengths[:, None]
+            reach = np.maximum(np.abs(origins), np.abs(ends)).max(axis=1)
+            cells = np.abs(ends - origins).sum(axis=1) / self._dim
+        for what, values, most in (("reaches", reach, MAX_HASH_CELL_COORDINATE),
+                                   ("walks cells", cells, MAX_HASH_CELLS_PER_OBJECT)):
+            bad = ~(values <= most)
+            if bad.any():
+                q = int(np.flatnonzero(bad)[0])
+                raise ValueError(f"{self.name}: ray {q} {what} {values[q]:.3g}, over its limit of {most:.3g} "
+                                 "(Chipmunk's spatial hash walks every cell along a ray; `dim` sets the cell)")
+
     def _update(self, positions):
         self._check_cells(positions)
         super()._update(positions)

@@ -401,6 +401,10 @@ class ChipmunkHashIndex(HashCellGuard, _ChipmunkIndex):
     defaults = {"dim": None, "count": None}
     sweeps = HASH_SWEEPS
 
+    def _rays(self, origins, directions, lengths, every: bool):
+        self._check_ray_cells(origins, directions, lengths)
+        return super()._rays(origins, directions, lengths, every)
+
     def _new_index(self, positions, radii, static_index):
         return lib.cpSpaceHashNew(self._configure(positions, radii), self._count, BOX_OF, static_index)
 
