@@ -101,7 +101,7 @@ def cases(dim: int) -> list[BoxCase]:
     ]
 
 
-def takes(name: str, case: BoxCase) -> bool:  # every case is of boxes
+def takes_boxes(name: str) -> bool:  # every case is of boxes
     return "boxes" in engines.backend_class(name).shapes
 
 
@@ -152,12 +152,12 @@ def problems_of(name: str, case: BoxCase, result: list) -> list[str]:
 
 def every_outcome(dim: int, names: list[str]) -> dict[str, dict[str, list]]:
     """Case name -> backend -> outcome, for the cases `names` and every backend that takes them."""
-    return {case.name: {name: outcome_of(run_case, name, case) for name in available_for(case, dim)}
+    return {case.name: {name: outcome_of(run_case, name, case) for name in taking_boxes_in(dim)}
             for case in cases(dim) if case.name in names}
 
 
-def available_for(case: BoxCase, dim: int) -> list[str]:
-    return [n for n in engines.available() if engines.works_in(n, dim) and takes(n, case)]
+def taking_boxes_in(dim: int) -> list[str]:
+    return [n for n in engines.available() if engines.works_in(n, dim) and takes_boxes(n)]
 
 
 def tier_cases(dim: int) -> list[BoxCase]:
@@ -182,7 +182,7 @@ def outcomes() -> dict[int, dict[str, dict[str, list]]]:
 @pytest.mark.parametrize("dim", [2, 3])
 def test_every_backend_answers_boxes_and_queries_exactly_or_refuses_in_one_line(outcomes, case, dim):
     by_name = {c.name: c for c in cases(dim)}
-    assert set(outcomes[dim][case]) == set(available_for(by_name[case], dim))
+    assert set(outcomes[dim][case]) == set(taking_boxes_in(dim))
     problems = [f"{name}: {p}" for name, result in outcomes[dim][case].items()
                 for p in problems_of(name, by_name[case], result)]
     assert not problems, "\n".join(problems)

@@ -46,32 +46,27 @@ def meets_within_rounding(eps: float):
     return applies
 
 
-FLOAT32 = float(np.finfo(np.float32).eps)
-# Engine -> (query kind, the scenes and queries it mishandles on that kind): each shown by
-# test_an_engine_misses_queries_where_its_limits_say (test_adversarial_boxes_and_queries.py).
-QUERY_LIMITATIONS: dict[str, list] = {
-    **{name: [(kind, meets_within_rounding(FLOAT32)) for kind in kinds]
-       for name, kinds in [("box2d.v3", QUERIES), ("rapier.bvh", ("rays", "points")), ("bullet.dbvt", ("rays",)),
-                           ("bullet.simple", ("rays",))]},
-    "mujoco.sap": [("rays", meets_within_rounding(float(np.finfo(np.float64).eps)))],
-}
-
-
-def touching_boxes(positions, sizes, kind, query) -> bool:
+def touching_after_a_step(positions, sizes, kind, query) -> bool:
     """Box2D v3 after a step on boxes that touch exactly (its solver pushed them apart; the
     frame's transforms go back in before the query): its ray cast misses hits the rule has."""
     return sizes.ndim == 2 and touching_exactly(positions, sizes)
 
 
-def boxes_under_a_tenth(positions, sizes, kind, query) -> bool:
-    """Bullet's ray test on boxes under 0.1 across (its box shapes keep a collision margin):
-    hits up to 2e-3 off, a tile's corner passed."""
-    return sizes.ndim == 2 and bool(len(sizes)) and float(sizes.min()) < 0.05 + 1e-12
+def boxes_at_most_a_tenth(positions, sizes, kind, query) -> bool:
+    """Bullet's ray test on boxes at most 0.1 across: hits up to 2e-3 off, a tile's corner passed."""
+    return sizes.ndim == 2 and bool(len(sizes)) and float(sizes.min()) <= 0.05
 
 
-QUERY_LIMITATIONS["box2d.v3"].append(("rays", touching_boxes))
-for _name in ("bullet.dbvt", "bullet.simple"):
-    QUERY_LIMITATIONS[_name].append(("rays", boxes_under_a_tenth))
+FLOAT32 = float(np.finfo(np.float32).eps)
+# Engine -> (query kind, the scenes and queries it mishandles on that kind): each shown by
+# test_an_engine_misses_queries_where_its_limits_say (test_adversarial_boxes_and_queries.py).
+QUERY_LIMITATIONS: dict[str, list] = {
+    "box2d.v3": [*[(kind, meets_within_rounding(FLOAT32)) for kind in QUERIES], ("rays", touching_after_a_step)],
+    "rapier.bvh": [(kind, meets_within_rounding(FLOAT32)) for kind in ("rays", "points")],
+    **{name: [("rays", meets_within_rounding(FLOAT32)), ("rays", boxes_at_most_a_tenth)]
+       for name in ("bullet.dbvt", "bullet.simple")},
+    "mujoco.sap": [("rays", meets_within_rounding(float(np.finfo(np.float64).eps)))],
+}
 
 
 def ray(origin, direction, length):
